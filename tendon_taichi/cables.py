@@ -1,0 +1,68 @@
+"""Cables: the contractile elements of both robots (DESIGN.md section 2).
+
+A cable is a polyline through points embedded in the rest mesh, with one rest
+length ``a0``, one contraction ``ac`` and one axial stiffness ``EA``; it slides
+freely through its interior points, so its length is the sum of its segment
+lengths and its tension is the same along it. A fiber of the idealized robot is
+a one-segment cable; a tendon of the realizable robot is a many-segment one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .mesh import Embedding, Mesh
+
+
+@dataclass(frozen=True, eq=False)
+class CableSet:
+    """``points``: embedded points (p); ``segments`` (S, 2) pairs of point ids;
+    cable ``c`` owns segments ``start[c]:start[c+1]`` (``start`` (C+1,));
+    ``a0`` (C,) rest lengths, m; ``stiffness`` (C,) EA, N."""
+
+    points: Embedding
+    segments: np.ndarray
+    start: np.ndarray
+    a0: np.ndarray
+    stiffness: np.ndarray
+
+    @property
+    def n_cables(self) -> int:
+        return len(self.a0)
+
+    @property
+    def n_segments(self) -> int:
+        return len(self.segments)
+
+    @property
+    def single_segment(self) -> bool:
+        """Every cable is one segment (the fiber lattice)."""
+        return self.n_segments == self.n_cables
+
+    @staticmethod
+    def fibers(embedding: Embedding, edges: np.ndarray, a0: np.ndarray, stiffness: float) -> "CableSet":
+        """One single-segment cable per fiber (edges: pairs of embedded point ids)."""
+        edges = np.asarray(edges, dtype=np.int64)
+        n = len(edges)
+        return CableSet(embedding, edges, np.arange(n + 1, dtype=np.int64),
+                        np.asarray(a0, dtype=float), np.full(n, float(stiffness)))
+
+    @staticmethod
+    def polylines(mesh: Mesh, paths: list[np.ndarray], stiffness: float) -> "CableSet":
+        """One cable per rest-state polyline (each (k_i, 2), k_i >= 2, m); rest length
+        is the polyline's length."""
+        pts, segs, start, a0 = [], [], [0], []
+        base = 0
+        for path in paths:
+            path = np.asarray(path, dtype=float)
+            k = len(path)
+            pts.append(path)
+            segs.append(base + np.stack([np.arange(k - 1), np.arange(1, k)], axis=1))
+            start.append(start[-1] + k - 1)
+            a0.append(float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()))
+            base += k
+        emb, _ = mesh.locate(np.concatenate(pts))
+        return CableSet(emb, np.concatenate(segs), np.array(start, dtype=np.int64),
+                        np.array(a0), np.full(len(paths), float(stiffness)))

@@ -1,0 +1,106 @@
+"""Writing results: the problem export (``.npz``, DESIGN.md section 6) and VTU files.
+
+Every file is written to a temporary name beside its destination and renamed
+into place, so an interrupted or failed run never leaves a half-written file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .problem import Problem
+
+#: arrays every export holds (DESIGN.md section 6), in addition to extras
+EXPORT_KEYS = ("nodes", "triangles", "fixed", "fiber_nodes_tri", "fiber_nodes_bary", "fibers",
+               "a0", "ac", "tau", "x", "target_tri", "target_bary", "target_goal",
+               "youngs_modulus", "poisson_ratio", "thickness", "fiber_stiffness", "eps",
+               "gravity", "density")
+
+
+@contextmanager
+def atomic_path(path: str | Path):
+    """Yield a temporary path in the destination's folder; rename it to ``path``
+    when the block succeeds, delete it when it fails."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create folder '{path.parent}': {exc}") from None
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def write_json(data: dict, path: str | Path) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2) + "\n")
+
+
+def problem_arrays(problem: Problem, x: np.ndarray, ac: np.ndarray, tau: np.ndarray) -> dict:
+    """The export's arrays for positions x (n, 2), contractions ac (f,) m, tensions tau (f,) N."""
+    sc, mat, fib = problem.scene, problem.material, problem.fibers
+    pairs = fib.pairs
+    return {
+        "nodes": problem.mesh.nodes, "triangles": problem.mesh.triangles, "fixed": problem.fixed,
+        "fiber_nodes": fib.nodes, "fiber_nodes_tri": fib.embedding.tri,
+        "fiber_nodes_bary": fib.embedding.bary, "fibers": fib.edges,
+        "a0": fib.a0, "ac": np.asarray(ac, dtype=float), "tau": np.asarray(tau, dtype=float),
+        "x": np.asarray(x, dtype=float),
+        "target_tri": problem.target.tri, "target_bary": problem.target.bary,
+        "target_point": np.array([t.point for t in sc.targets]), "target_goal": problem.target_goal,
+        "fiber_pairs": pairs.fibers, "fiber_pair_node": pairs.node, "fiber_pair_cos2": pairs.cos2,
+        "youngs_modulus": mat.youngs_modulus, "poisson_ratio": mat.poisson_ratio,
+        "thickness": mat.thickness, "density": mat.density, "gravity": np.array(mat.gravity),
+        "fiber_stiffness": sc.fibers.stiffness, "eps": sc.fibers.eps,
+        "max_contraction": sc.fibers.max_contraction, "max_payout": sc.fibers.max_payout,
+        "spacing": fib.spacing, "body_size": problem.size, "resolution": problem.level,
+        "scene_name": sc.name, "scene_toml": sc.source,
+    }
+
+
+def write_export(path: str | Path, problem: Problem, x: np.ndarray, ac: np.ndarray,
+                 tau: np.ndarray, **extra) -> Path:
+    """Write the problem export to ``path`` (.npz); ``extra`` arrays are added."""
+    data = problem_arrays(problem, x, ac, tau)
+    data.update(extra)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **data)
+    return Path(path)
+
+
+def write_vtu(path: str | Path, problem: Problem, x: np.ndarray, tau: np.ndarray) -> Path:
+    """The deformed mesh (triangles, per-node displacement, clamped flag) and the
+    fibers as line cells with their tension, for ParaView or meshio."""
+    import meshio
+
+    X = problem.mesh.nodes
+    fib = problem.fibers
+    c_rest = fib.embedding.positions(problem.mesh.triangles, X)
+    c_now = fib.embedding.positions(problem.mesh.triangles, x)
+    pts = np.concatenate([x, c_now])
+    disp = np.concatenate([x - X, c_now - c_rest])
+    n = len(X)
+    pad = lambda a: np.concatenate([a, np.zeros((len(a), 1))], axis=1)  # noqa: E731
+    mesh = meshio.Mesh(
+        pad(pts),
+        [("triangle", problem.mesh.triangles), ("line", fib.edges + n)],
+        point_data={"displacement": pad(disp),
+                    "fixed": np.concatenate([problem.fixed, np.zeros(len(c_now), bool)]).astype(float)},
+        cell_data={"tension": [np.zeros(problem.mesh.n_triangles), np.asarray(tau, dtype=float)]},
+    )
+    with atomic_path(path) as tmp:
+        meshio.write(str(tmp), mesh, file_format="vtu")
+    return Path(path)

@@ -1,0 +1,408 @@
+"""Scene files: the TOML format of DESIGN.md section 6, validated into typed objects.
+
+Units are SI throughout (metres, pascals, newtons, kilograms). Every key is
+optional unless marked *required*; the defaults below are the documented ones.
+
+``[body]``
+    ``outline`` (*required* unless ``mesh``): polygon ``[[x, y], ...]``, m,
+    either orientation. ``holes``: list of polygons. ``mesh``: a triangle mesh
+    file read with meshio (``.msh``, ``.vtu``, ``.obj``, ...), relative to the
+    scene file. ``youngs_modulus`` 5e4 Pa, ``poisson_ratio`` 0.45,
+    ``thickness`` 0.01 m, ``density`` 1100 kg/m^3, ``gravity`` [0, 0] m/s^2,
+    ``max_triangle_area`` 8e-6 m^2 at resolution 1 (halves per level; for a
+    mesh file: the file's mesh at level 1, refined to half its largest area
+    per level).
+``[fibers]``
+    ``spacing`` 0.005 m (divided by sqrt(2) per level), ``stiffness`` (EA)
+    50 N, ``max_contraction`` (cmax) 0.33, ``max_payout`` (pmax) 0.5,
+    ``eps`` 0.01 (width of the cubic zone of the unilateral energy, strain).
+``[[fixed]]`` (*required*, one or more)
+    ``box = [[xmin, ymin], [xmax, ymax]]``: nodes inside (edges included) are
+    clamped.
+``[[targets]]`` (*required*, one or more)
+    ``point = [x, y]`` a material point of the body, ``goal = [x, y]`` where
+    it should go, m.
+``[optimize]``
+    See :class:`OptimizeSettings`.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, fields, replace
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SceneError
+
+
+@dataclass(frozen=True)
+class Material:
+    """Body material and loading: E (Pa), nu, thickness h (m), density (kg/m^3), gravity (m/s^2)."""
+
+    youngs_modulus: float = 5.0e4
+    poisson_ratio: float = 0.45
+    thickness: float = 0.01
+    density: float = 1100.0
+    gravity: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def mu(self) -> float:
+        """First Lame parameter-like shear modulus E / (2 (1 + nu)), Pa."""
+        return self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
+
+    @property
+    def lam(self) -> float:
+        """Lame's lambda E nu / ((1 + nu)(1 - 2 nu)), Pa."""
+        nu = self.poisson_ratio
+        return self.youngs_modulus * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+
+@dataclass(frozen=True)
+class Body:
+    """The body's shape (an outline with holes, or a mesh file) and its material."""
+
+    outline: np.ndarray | None  # (k, 2), counter-clockwise after loading
+    holes: tuple[np.ndarray, ...]  # each (k, 2), clockwise after loading
+    mesh_file: Path | None
+    material: Material
+    max_triangle_area: float | None  # m^2 at level 1
+
+
+@dataclass(frozen=True)
+class FiberSettings:
+    """The idealized robot's fiber lattice (DESIGN.md section 2)."""
+
+    spacing: float = 0.005
+    stiffness: float = 50.0
+    max_contraction: float = 0.33
+    max_payout: float = 0.5
+    eps: float = 0.01
+
+
+@dataclass(frozen=True)
+class Box:
+    """An axis-aligned box, edges included: ``lo`` and ``hi`` corners, m."""
+
+    lo: tuple[float, float]
+    hi: tuple[float, float]
+
+    def contains(self, points: np.ndarray, tol: float = 0.0) -> np.ndarray:
+        p = np.asarray(points, dtype=float)
+        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
+        return np.all((p >= lo - tol) & (p <= hi + tol), axis=1)
+
+
+@dataclass(frozen=True)
+class Target:
+    """A material point (rest coordinates, m) and its goal position (m)."""
+
+    point: tuple[float, float]
+    goal: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Homotopy:
+    """The L0 homotopy schedule: k0, k <- k * factor per stage, stop below k_min (N)."""
+
+    k0: float = 1.0
+    factor: float = 0.5
+    k_min: float = 0.01
+
+
+@dataclass(frozen=True)
+class OptimizeSettings:
+    """Weights and schedule of the regularized soft IK (DESIGN.md section 3).
+
+    ``sparsity`` w_sp, ``continuity`` w_ct, ``contraction_reg`` w_ac
+    (dimensionless weights); ``tension_scale`` tau_ref (N);
+    ``initial_contraction`` r0 (ratio of rest length); ``active_threshold``
+    (x tau_ref); ``sparsity_measure`` and ``continuity_measure`` are
+    ``"length"`` (resolution independent, default) or ``"count"`` (the
+    paper's literal sums); ``stage_iterations`` caps L-BFGS-B iterations per
+    stage.
+    """
+
+    sparsity: float = 1.0e-4
+    continuity: float = 2.5e-5
+    contraction_reg: float = 1.0e-6
+    tension_scale: float = 1.0
+    initial_contraction: float = 0.005
+    homotopy: Homotopy = field(default_factory=Homotopy)
+    active_threshold: float = 0.01
+    sparsity_measure: str = "length"
+    continuity_measure: str = "length"
+    stage_iterations: int = 200
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene. ``source`` is the TOML text it was read from."""
+
+    name: str
+    body: Body
+    fibers: FiberSettings
+    fixed: tuple[Box, ...]
+    targets: tuple[Target, ...]
+    optimize: OptimizeSettings
+    source: str
+    origin: str  # a file path, or "builtin:<name>"
+
+    def with_optimize(self, **changes) -> "Scene":
+        """A copy with some optimize settings replaced (CLI overrides)."""
+        return replace(self, optimize=replace(self.optimize, **changes))
+
+
+# --------------------------------------------------------------------------- parsing
+
+class _Reader:
+    """Typed access to one TOML table with error messages that name the key."""
+
+    def __init__(self, table: dict, where: str, origin: str):
+        if not isinstance(table, dict):
+            raise SceneError(f"{origin}: {where} must be a table")
+        self.table, self.where, self.origin = table, where, origin
+        self.used: set[str] = set()
+
+    def _fail(self, key: str, msg: str):
+        raise SceneError(f"{self.origin}: {self.where}.{key} {msg}")
+
+    def has(self, key: str) -> bool:
+        return key in self.table
+
+    def raw(self, key: str):
+        self.used.add(key)
+        return self.table[key]
+
+    def number(self, key: str, default: float | None = None, *, gt=None, ge=None, lt=None,
+               le=None, required: bool = False) -> float | None:
+        if key not in self.table:
+            if required:
+                self._fail(key, "is required")
+            return default
+        v = self.raw(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            self._fail(key, f"must be a finite number (got {v!r})")
+        v = float(v)
+        for bound, ok, word in ((gt, lambda b: v > b, ">"), (ge, lambda b: v >= b, ">="),
+                                (lt, lambda b: v < b, "<"), (le, lambda b: v <= b, "<=")):
+            if bound is not None and not ok(bound):
+                self._fail(key, f"must be {word} {bound:g} (got {v:g})")
+        return v
+
+    def integer(self, key: str, default: int, *, ge: int) -> int:
+        if key not in self.table:
+            return default
+        v = self.raw(key)
+        if isinstance(v, bool) or not isinstance(v, int) or v < ge:
+            self._fail(key, f"must be an integer >= {ge} (got {v!r})")
+        return v
+
+    def choice(self, key: str, default: str, options: tuple[str, ...]) -> str:
+        if key not in self.table:
+            return default
+        v = self.raw(key)
+        if v not in options:
+            self._fail(key, f"must be one of {', '.join(repr(o) for o in options)} (got {v!r})")
+        return v
+
+    def point(self, key: str, default=None, required: bool = False) -> tuple[float, float] | None:
+        if key not in self.table:
+            if required:
+                self._fail(key, "is required")
+            return default
+        return _as_point(self.raw(key), f"{self.origin}: {self.where}.{key}")
+
+    def polygon(self, value, name: str) -> np.ndarray:
+        where = f"{self.origin}: {self.where}.{name}"
+        if not isinstance(value, list) or len(value) < 3:
+            raise SceneError(f"{where} must be a list of at least 3 [x, y] points")
+        return np.array([_as_point(p, where) for p in value], dtype=float)
+
+    def finish(self) -> None:
+        unknown = sorted(set(self.table) - self.used)
+        if unknown:
+            raise SceneError(f"{self.origin}: unknown key{'s' if len(unknown) > 1 else ''} "
+                             f"{', '.join(repr(k) for k in unknown)} in {self.where}")
+
+
+def _as_point(v, where: str) -> tuple[float, float]:
+    if (not isinstance(v, list) or len(v) != 2
+            or any(isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c)
+                   for c in v)):
+        raise SceneError(f"{where} must be [x, y] with two finite numbers (got {v!r})")
+    return (float(v[0]), float(v[1]))
+
+
+def _read_body(r: _Reader, base_dir: Path | None) -> Body:
+    from .geometry import normalize_polygon, polygon_self_intersects, polygons_overlap
+
+    E = r.number("youngs_modulus", Material.youngs_modulus, gt=0.0)
+    nu = r.number("poisson_ratio", Material.poisson_ratio, gt=-1.0, lt=0.5)
+    h = r.number("thickness", Material.thickness, gt=0.0)
+    rho = r.number("density", Material.density, ge=0.0)
+    g = r.point("gravity", Material.gravity)
+    material = Material(E, nu, h, rho, g)
+    area = r.number("max_triangle_area", None, gt=0.0)
+
+    outline, holes, mesh_file = None, (), None
+    if r.has("mesh") == r.has("outline"):
+        raise SceneError(f"{r.origin}: [body] needs exactly one of 'outline' or 'mesh'")
+    if r.has("mesh"):
+        name = r.raw("mesh")
+        if not isinstance(name, str) or not name:
+            raise SceneError(f"{r.origin}: body.mesh must be a file name")
+        mesh_file = Path(name)
+        if not mesh_file.is_absolute():
+            mesh_file = (base_dir or Path.cwd()) / mesh_file
+        if not mesh_file.is_file():
+            raise SceneError(f"{r.origin}: body.mesh file '{mesh_file}' does not exist")
+        if r.has("holes"):
+            raise SceneError(f"{r.origin}: body.holes cannot be combined with body.mesh")
+    else:
+        outline = r.polygon(r.raw("outline"), "outline")
+        if polygon_self_intersects(outline):
+            raise SceneError(f"{r.origin}: body.outline is self-intersecting or degenerate")
+        outline = normalize_polygon(outline, ccw=True)
+        if r.has("holes"):
+            raw = r.raw("holes")
+            if not isinstance(raw, list):
+                raise SceneError(f"{r.origin}: body.holes must be a list of polygons")
+            hs = []
+            for i, poly in enumerate(raw):
+                hole = r.polygon(poly, f"holes[{i}]")
+                if polygon_self_intersects(hole):
+                    raise SceneError(f"{r.origin}: body.holes[{i}] is self-intersecting or degenerate")
+                hs.append(normalize_polygon(hole, ccw=False))
+            holes = tuple(hs)
+            problem = polygons_overlap(outline, holes)
+            if problem:
+                raise SceneError(f"{r.origin}: body.{problem}")
+        if area is None:
+            area = 8.0e-6
+    r.finish()
+    return Body(outline, holes, mesh_file, material, area)
+
+
+def _read_fibers(r: _Reader) -> FiberSettings:
+    d = FiberSettings()
+    fs = FiberSettings(
+        spacing=r.number("spacing", d.spacing, gt=0.0),
+        stiffness=r.number("stiffness", d.stiffness, gt=0.0),
+        max_contraction=r.number("max_contraction", d.max_contraction, gt=0.0, lt=1.0),
+        max_payout=r.number("max_payout", d.max_payout, ge=0.0),
+        eps=r.number("eps", d.eps, gt=0.0),
+    )
+    r.finish()
+    return fs
+
+
+def _read_optimize(r: _Reader, fibers: FiberSettings) -> OptimizeSettings:
+    d = OptimizeSettings()
+    hom = d.homotopy
+    if r.has("homotopy"):
+        h = _Reader(r.raw("homotopy"), f"{r.where}.homotopy", r.origin)
+        hom = Homotopy(k0=h.number("k0", hom.k0, gt=0.0),
+                       factor=h.number("factor", hom.factor, gt=0.0, lt=1.0),
+                       k_min=h.number("k_min", hom.k_min, gt=0.0))
+        h.finish()
+    measures = ("length", "count")
+    opt = OptimizeSettings(
+        sparsity=r.number("sparsity", d.sparsity, ge=0.0),
+        continuity=r.number("continuity", d.continuity, ge=0.0),
+        contraction_reg=r.number("contraction_reg", d.contraction_reg, ge=0.0),
+        tension_scale=r.number("tension_scale", d.tension_scale, gt=0.0),
+        initial_contraction=r.number("initial_contraction", d.initial_contraction,
+                                     ge=-fibers.max_payout, le=fibers.max_contraction),
+        homotopy=hom,
+        active_threshold=r.number("active_threshold", d.active_threshold, gt=0.0),
+        sparsity_measure=r.choice("sparsity_measure", d.sparsity_measure, measures),
+        continuity_measure=r.choice("continuity_measure", d.continuity_measure, measures),
+        stage_iterations=r.integer("stage_iterations", d.stage_iterations, ge=1),
+    )
+    r.finish()
+    return opt
+
+
+def _array_of_tables(doc: _Reader, key: str) -> list[dict]:
+    if not doc.has(key):
+        raise SceneError(f"{doc.origin}: at least one [[{key}]] entry is required")
+    items = doc.raw(key)
+    if not isinstance(items, list) or not items:
+        raise SceneError(f"{doc.origin}: [[{key}]] must be a non-empty array of tables")
+    return items
+
+
+def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None,
+                default_name: str = "scene") -> Scene:
+    """Parse and validate scene TOML ``text``; ``origin`` names it in errors."""
+    try:
+        doc_raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{origin}: invalid TOML: {exc}") from None
+    doc = _Reader(doc_raw, "scene", origin)
+    name = doc.raw("name") if doc.has("name") else default_name
+    if not isinstance(name, str) or not name:
+        raise SceneError(f"{origin}: 'name' must be a non-empty string")
+    if not doc.has("body"):
+        raise SceneError(f"{origin}: a [body] table is required")
+    body = _read_body(_Reader(doc.raw("body"), "body", origin), base_dir)
+    fibers = _read_fibers(_Reader(doc.raw("fibers") if doc.has("fibers") else {}, "fibers", origin))
+
+    fixed = []
+    for i, item in enumerate(_array_of_tables(doc, "fixed")):
+        r = _Reader(item, f"fixed[{i}]", origin)
+        if not r.has("box"):
+            raise SceneError(f"{origin}: fixed[{i}].box is required")
+        box = r.raw("box")
+        if not isinstance(box, list) or len(box) != 2:
+            raise SceneError(f"{origin}: fixed[{i}].box must be [[xmin, ymin], [xmax, ymax]]")
+        lo, hi = (_as_point(c, f"{origin}: fixed[{i}].box") for c in box)
+        if lo[0] > hi[0] or lo[1] > hi[1]:
+            raise SceneError(f"{origin}: fixed[{i}].box has min > max")
+        r.finish()
+        fixed.append(Box(lo, hi))
+
+    targets = []
+    for i, item in enumerate(_array_of_tables(doc, "targets")):
+        r = _Reader(item, f"targets[{i}]", origin)
+        targets.append(Target(r.point("point", required=True), r.point("goal", required=True)))
+        r.finish()
+
+    opt = _read_optimize(_Reader(doc.raw("optimize") if doc.has("optimize") else {},
+                                 "optimize", origin), fibers)
+    doc.finish()
+    return Scene(name, body, fibers, tuple(fixed), tuple(targets), opt, text, origin)
+
+
+def builtin_scenes() -> list[str]:
+    """Names of the scenes shipped with the package."""
+    folder = resources.files("tendon_taichi") / "scenes"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """Load a built-in scene by name, or a scene TOML file by path."""
+    s = str(name_or_path)
+    path = Path(s)
+    if s.endswith(".toml") or path.is_file():
+        try:
+            text = path.read_text()
+        except FileNotFoundError:
+            raise SceneError(f"scene file '{s}' does not exist") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise SceneError(f"cannot read scene file '{s}': {exc}") from None
+        return parse_scene(text, origin=s, base_dir=path.resolve().parent, default_name=path.stem)
+    if s in builtin_scenes():
+        res = resources.files("tendon_taichi") / "scenes" / f"{s}.toml"
+        return parse_scene(res.read_text(), origin=f"builtin:{s}", base_dir=None, default_name=s)
+    raise SceneError(f"unknown scene '{s}': not a file, and not a built-in scene "
+                     f"({', '.join(builtin_scenes())})")
+
+
+def optimize_keys() -> list[str]:
+    """The keys of the [optimize] table (for CLI overrides and sweeps)."""
+    return [f.name for f in fields(OptimizeSettings)]
