@@ -42,6 +42,12 @@ class CableSet:
         return self.n_segments == self.n_cables
 
     @staticmethod
+    def empty() -> "CableSet":
+        """No cables: the bare body."""
+        return CableSet(Embedding(np.zeros(0, np.int64), np.zeros((0, 3))), np.zeros((0, 2), np.int64),
+                        np.zeros(1, np.int64), np.zeros(0), np.zeros(0))
+
+    @staticmethod
     def fibers(embedding: Embedding, edges: np.ndarray, a0: np.ndarray, stiffness: float) -> "CableSet":
         """One single-segment cable per fiber (edges: pairs of embedded point ids)."""
         edges = np.asarray(edges, dtype=np.int64)
@@ -50,19 +56,23 @@ class CableSet:
                         np.asarray(a0, dtype=float), np.full(n, float(stiffness)))
 
     @staticmethod
-    def polylines(mesh: Mesh, paths: list[np.ndarray], stiffness: float) -> "CableSet":
-        """One cable per rest-state polyline (each (k_i, 2), k_i >= 2, m); rest length
-        is the polyline's length."""
-        pts, segs, start, a0 = [], [], [0], []
-        base = 0
+    def polylines(mesh: Mesh, paths: list[np.ndarray], stiffness: float,
+                  tol: float | None = None) -> "CableSet":
+        """One cable per rest-state polyline (each (k_i, 2), k_i >= 2, m, inside the
+        body within ``tol``, default 1e-9 L); its rest length is the polyline's length."""
+        tol = 1e-9 * mesh.size if tol is None else tol
+        paths = [np.asarray(path, dtype=float).reshape(-1, 2) for path in paths]
+        if any(len(path) < 2 for path in paths):
+            raise ValueError("a cable needs at least two waypoints")
+        emb, dist = mesh.locate(np.concatenate(paths), max_dist=tol)
+        if np.any(dist > tol):
+            raise ValueError("a cable waypoint lies outside the body")
+        segs, start, a0, base = [], [0], [], 0
         for path in paths:
-            path = np.asarray(path, dtype=float)
             k = len(path)
-            pts.append(path)
             segs.append(base + np.stack([np.arange(k - 1), np.arange(1, k)], axis=1))
             start.append(start[-1] + k - 1)
             a0.append(float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()))
             base += k
-        emb, _ = mesh.locate(np.concatenate(pts))
         return CableSet(emb, np.concatenate(segs), np.array(start, dtype=np.int64),
                         np.array(a0), np.full(len(paths), float(stiffness)))

@@ -8,19 +8,21 @@
 * ``U_c = EA_c a_c Z(e_c)``, ``a_c = a0_c - ac_c``, ``e_c = (L_c - a_c)/a_c``,
   ``L_c(x)`` the length of cable ``c`` (the sum of its segment lengths).
 
-Derived cable quantities (all per cable, evaluated at the model's positions):
-tension ``tau = dU/dL = EA Z'(e)`` (N), ``kc = dtau/dL = EA Z''(e)/a`` (N/m)
-and ``tau_ac = dtau/dac = EA Z''(e) L/a^2`` (N/m). The mixed derivative of the
+Derived cable quantities (per cable, at the model's positions): tension
+``tau = dU/dL = EA Z'(e)`` (N), ``kc = dtau/dL = EA Z''(e)/a`` (N/m) and
+``tau_ac = dtau/dac = EA Z''(e) L/a^2`` (N/m). The mixed derivative of the
 energy is ``d2E/(dx dac_c) = tau_ac_c dL_c/dx``.
 
-Everything lives in Taichi fields allocated once per model; numpy arrays
-cross only at the public methods. Node forces are *gathered* per node (not
-scattered with atomics) and sums are taken over fixed blocks, so every result
-is bit-for-bit deterministic. Small models run their loops serialized (a
-parallel loop costs ~0.1 ms to dispatch on the CPU backend); large ones in
-parallel (``parallel``; see :func:`runtime.parallel_threshold`).
+Storage: every array of a model lives in two flat Taichi ndarrays allocated
+once per model, ``F`` (f64) and ``I`` (i32); ``I`` starts with a table of
+sizes and offsets (the ``_`` slots below). Kernels are module-level and take
+``(F, I)``, so they compile once per process and serve every model (a new
+mesh, a sweep case, a realizable robot) without recompiling, at a launch
+cost of a few tens of microseconds. Node forces are *gathered* per node (no
+atomics) and sums run over fixed blocks, so results are bit-for-bit
+deterministic. Small models run their loops serialized (on the CPU a
+parallel loop costs ~0.1 ms to dispatch), large ones in parallel.
 """
-
 
 from dataclasses import dataclass
 
@@ -36,12 +38,587 @@ from .scene import Material
 
 vec2 = ti.types.vector(2, ti.f64)
 vec3 = ti.types.vector(3, ti.f64)
-vec4 = ti.types.vector(4, ti.f64)
+F64 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+I32 = ti.types.ndarray(dtype=ti.i32, ndim=1)
 
-#: number of blocks of every deterministic reduction
+#: blocks of every deterministic reduction
 _NB = 32
 
+# ---------------------------------------------------------------- layout slots
+# I[slot] holds a size or the offset of an array (in F for f64 arrays, in I for ints).
+_SIZES = ("N", "M", "S", "C", "P", "SINGLE")
+_INTS = (  # name, length in units of (n, m, S, C, P, 1)
+    ("TRI", (0, 3, 0, 0, 0, 0)),         # triangle corners
+    ("NE_START", (1, 0, 0, 0, 0, 1)),    # node -> element-corner CSR starts
+    ("NE", (0, 3, 0, 0, 0, 0)),          # entries 3 e + k
+    ("NS_START", (1, 0, 0, 0, 0, 1)),    # node -> segment CSR starts
+    ("NS", (0, 0, 6, 0, 0, 0)),          # segment ids
+    ("PT_TRI", (0, 0, 0, 0, 1, 0)),      # triangle of each embedded point
+    ("SEG", (0, 0, 3, 0, 0, 0)),         # per segment: point a, point b, cable
+    ("CAB_START", (0, 0, 0, 1, 0, 1)),   # cable -> segment starts
+    ("CG_STATE", (0, 0, 0, 0, 0, 4)),    # iterations, done, negative curvature
+)
+_FLOATS = (
+    ("X0", (2, 0, 0, 0, 0, 0)), ("X", (2, 0, 0, 0, 0, 0)), ("XT", (2, 0, 0, 0, 0, 0)),
+    ("DX", (2, 0, 0, 0, 0, 0)), ("G", (2, 0, 0, 0, 0, 0)), ("MASK", (2, 0, 0, 0, 0, 0)),
+    ("FEXT", (2, 0, 0, 0, 0, 0)), ("VIN", (2, 0, 0, 0, 0, 0)), ("VOUT", (2, 0, 0, 0, 0, 0)),
+    ("CB", (2, 0, 0, 0, 0, 0)), ("CX", (2, 0, 0, 0, 0, 0)), ("CR", (2, 0, 0, 0, 0, 0)),
+    ("CZ", (2, 0, 0, 0, 0, 0)), ("CP", (2, 0, 0, 0, 0, 0)), ("CQ", (2, 0, 0, 0, 0, 0)),
+    ("MINV", (4, 0, 0, 0, 0, 0)),        # block-Jacobi preconditioner, 2x2 per node
+    ("BM", (0, 4, 0, 0, 0, 0)),          # D_m^-1 per element
+    ("VOL", (0, 1, 0, 0, 0, 0)),         # h A per element
+    ("D", (0, 16, 0, 0, 0, 0)),          # dP/dF per element (exact or projected)
+    ("EV", (0, 6, 0, 0, 0, 0)),          # per-element nodal vectors (scratch)
+    ("EE", (0, 1, 0, 0, 0, 0)),          # per-element energy
+    ("NS_COEF", (0, 0, 6, 0, 0, 0)),     # signed barycentric weight of each node-segment entry
+    ("PT_BARY", (0, 0, 0, 0, 3, 0)),
+    ("SEG_N", (0, 0, 2, 0, 0, 0)), ("SEG_L", (0, 0, 1, 0, 0, 0)), ("SEG_DD", (0, 0, 2, 0, 0, 0)),
+    ("SEG_W", (0, 0, 1, 0, 0, 0)), ("SEG_VEC", (0, 0, 2, 0, 0, 0)),
+    ("A0", (0, 0, 0, 1, 0, 0)), ("AC", (0, 0, 0, 1, 0, 0)), ("EA", (0, 0, 0, 1, 0, 0)),
+    ("L", (0, 0, 0, 1, 0, 0)), ("TAU", (0, 0, 0, 1, 0, 0)), ("KC", (0, 0, 0, 1, 0, 0)),
+    ("TAU_AC", (0, 0, 0, 1, 0, 0)), ("CE", (0, 0, 0, 1, 0, 0)), ("CW", (0, 0, 0, 1, 0, 0)),
+    ("CCOEF", (0, 0, 0, 1, 0, 0)),
+    ("SCALARS", (0, 0, 0, 0, 0, 16)), ("PARTIAL", (0, 0, 0, 0, 0, _NB)),
+)
+_SLOTS = {name: k for k, name in enumerate(_SIZES + tuple(n for n, _ in _INTS + _FLOATS))}
+globals().update({f"_{name}": k for name, k in _SLOTS.items()})
+_HEADER = len(_SLOTS)
+# SCALARS entries
+_MU, _LAM, _EPS, _FLOOR, _S0, _S1, _S2, _JMIN, _RZ, _RR, _PQ, _BB, _TOL2 = range(13)
+# CG_STATE entries
+_ITERS, _DONE, _NEGCURV = range(3)
 
+
+# ---------------------------------------------------------------- accessors
+@ti.func
+def _v(F: ti.template(), I: ti.template(), slot, i) -> vec2:
+    o = I[slot] + 2 * i
+    return vec2(F[o], F[o + 1])
+
+
+@ti.func
+def _set_v(F: ti.template(), I: ti.template(), slot, i, v: vec2):
+    o = I[slot] + 2 * i
+    F[o] = v[0]
+    F[o + 1] = v[1]
+
+
+@ti.func
+def _m2(F: ti.template(), I: ti.template(), slot, i) -> mat2:
+    o = I[slot] + 4 * i
+    return mat2([[F[o], F[o + 1]], [F[o + 2], F[o + 3]]])
+
+
+@ti.func
+def _set_m2(F: ti.template(), I: ti.template(), slot, i, A: mat2):
+    o = I[slot] + 4 * i
+    F[o], F[o + 1], F[o + 2], F[o + 3] = A[0, 0], A[0, 1], A[1, 0], A[1, 1]
+
+
+@ti.func
+def _m4(F: ti.template(), I: ti.template(), slot, i) -> mat4:
+    o = I[slot] + 16 * i
+    A = mat4(0.0)
+    for r, c in ti.static(ti.ndrange(4, 4)):
+        A[r, c] = F[o + 4 * r + c]
+    return A
+
+
+@ti.func
+def _set_m4(F: ti.template(), I: ti.template(), slot, i, A: mat4):
+    o = I[slot] + 16 * i
+    for r, c in ti.static(ti.ndrange(4, 4)):
+        F[o + 4 * r + c] = A[r, c]
+
+
+@ti.func
+def _f(F: ti.template(), I: ti.template(), slot, i) -> ti.f64:
+    return F[I[slot] + i]
+
+
+@ti.func
+def _set_f(F: ti.template(), I: ti.template(), slot, i, v: ti.f64):
+    F[I[slot] + i] = v
+
+
+@ti.func
+def _sc(F: ti.template(), I: ti.template(), k) -> ti.f64:
+    return F[I[_SCALARS] + k]
+
+
+@ti.func
+def _set_sc(F: ti.template(), I: ti.template(), k, v: ti.f64):
+    F[I[_SCALARS] + k] = v
+
+
+@ti.func
+def _cg(I: ti.template(), k) -> ti.i32:
+    return I[I[_CG_STATE] + k]
+
+
+@ti.func
+def _set_cg(I: ti.template(), k, v: ti.i32):
+    I[I[_CG_STATE] + k] = v
+
+
+# ---------------------------------------------------------------- building blocks
+@ti.func
+def _deformation_gradient(F: ti.template(), I: ti.template(), xslot, e) -> mat2:
+    """F_e = D_s D_m^-1 for the positions stored at ``xslot``."""
+    ot = I[_TRI] + 3 * e
+    a, b, c = I[ot], I[ot + 1], I[ot + 2]
+    xa = _v(F, I, xslot, a)
+    d1 = _v(F, I, xslot, b) - xa
+    d2 = _v(F, I, xslot, c) - xa
+    Ds = mat2([[d1[0], d2[0]], [d1[1], d2[1]]])
+    return Ds @ _m2(F, I, _BM, e)
+
+
+@ti.func
+def _store_element_vectors(F: ti.template(), I: ti.template(), e, G: mat2):
+    """Nodal vectors of element e from G = dE/dDs (columns: its nodes 1 and 2)."""
+    c1 = vec2(G[0, 0], G[1, 0])
+    c2 = vec2(G[0, 1], G[1, 1])
+    o = I[_EV] + 6 * e
+    F[o], F[o + 1] = -(c1[0] + c2[0]), -(c1[1] + c2[1])
+    F[o + 2], F[o + 3] = c1[0], c1[1]
+    F[o + 4], F[o + 5] = c2[0], c2[1]
+
+
+@ti.func
+def _point(F: ti.template(), I: ti.template(), xslot, p) -> vec2:
+    """Position of embedded point p for the positions at ``xslot``."""
+    ot = I[_TRI] + 3 * I[I[_PT_TRI] + p]
+    ob = I[_PT_BARY] + 3 * p
+    return (F[ob] * _v(F, I, xslot, I[ot]) + F[ob + 1] * _v(F, I, xslot, I[ot + 1])
+            + F[ob + 2] * _v(F, I, xslot, I[ot + 2]))
+
+
+@ti.func
+def _dot(F: ti.template(), I: ti.template(), aslot, bslot, out, serial: ti.template()):
+    """scalars[out] = sum_i a_i . b_i over nodes, deterministic."""
+    n = I[_N]
+    chunk = (n + _NB - 1) // _NB
+    op = I[_PARTIAL]
+    ti.loop_config(serialize=serial)
+    for blk in range(_NB):
+        acc = 0.0
+        for i in range(blk * chunk, ti.min((blk + 1) * chunk, n)):
+            acc += _v(F, I, aslot, i).dot(_v(F, I, bslot, i))
+        F[op + blk] = acc
+    total = 0.0
+    for blk in ti.static(range(_NB)):
+        total += F[op + blk]
+    _set_sc(F, I, out, total)
+
+
+@ti.func
+def _sum(F: ti.template(), I: ti.template(), slot, count, out, serial: ti.template()):
+    """scalars[out] = sum of the f64 array at ``slot`` [0, count), deterministic."""
+    chunk = (count + _NB - 1) // _NB
+    op = I[_PARTIAL]
+    ti.loop_config(serialize=serial)
+    for blk in range(_NB):
+        acc = 0.0
+        for i in range(blk * chunk, ti.min((blk + 1) * chunk, count)):
+            acc += _f(F, I, slot, i)
+        F[op + blk] = acc
+    total = 0.0
+    for blk in ti.static(range(_NB)):
+        total += F[op + blk]
+    _set_sc(F, I, out, total)
+
+
+@ti.func
+def _update_cables(F: ti.template(), I: ti.template(), xslot, serial: ti.template()):
+    """Segment geometry, cable lengths, tensions, stiffnesses and energies at ``xslot``."""
+    ti.loop_config(serialize=serial)
+    for s in range(I[_S]):
+        os = I[_SEG] + 3 * s
+        d = _point(F, I, xslot, I[os + 1]) - _point(F, I, xslot, I[os])
+        l = d.norm()
+        _set_f(F, I, _SEG_L, s, l)
+        nv = vec2(0.0, 0.0)
+        if l > 0.0:
+            nv = d / l
+        _set_v(F, I, _SEG_N, s, nv)
+    eps = _sc(F, I, _EPS)
+    ti.loop_config(serialize=serial)
+    for c in range(I[_C]):
+        L = 0.0
+        if I[_SINGLE] != 0:
+            L = _f(F, I, _SEG_L, c)
+        else:
+            for s in range(I[I[_CAB_START] + c], I[I[_CAB_START] + c + 1]):
+                L += _f(F, I, _SEG_L, s)
+        a = _f(F, I, _A0, c) - _f(F, I, _AC, c)
+        e = L / a - 1.0
+        EA = _f(F, I, _EA, c)
+        _set_f(F, I, _L, c, L)
+        _set_f(F, I, _TAU, c, EA * zcq_d1(e, eps))
+        _set_f(F, I, _KC, c, EA * zcq_d2(e, eps) / a)
+        _set_f(F, I, _TAU_AC, c, EA * zcq_d2(e, eps) * L / (a * a))
+        _set_f(F, I, _CE, c, EA * a * zcq(e, eps))
+
+
+@ti.func
+def _gather(F: ti.template(), I: ti.template(), dst, elems: ti.template(), masked: ti.template(), serial: ti.template()):
+    """dst_i = sum of the element vectors (if ``elems``) and the segment vectors
+    (times their signed barycentric weights) incident to node i."""
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        acc = vec2(0.0, 0.0)
+        if ti.static(elems):
+            for k in range(I[I[_NE_START] + i], I[I[_NE_START] + i + 1]):
+                ek = I[I[_NE] + k]
+                o = I[_EV] + 2 * ek  # ek = 3 e + corner; 6 e + 2 corner
+                acc += vec2(F[o], F[o + 1])
+        for k in range(I[I[_NS_START] + i], I[I[_NS_START] + i + 1]):
+            acc += F[I[_NS_COEF] + k] * _v(F, I, _SEG_VEC, I[I[_NS] + k])
+        if ti.static(masked):
+            acc *= _v(F, I, _MASK, i)
+        _set_v(F, I, dst, i, acc)
+
+
+@ti.func
+def _energy(F: ti.template(), I: ti.template(), xslot, serial: ti.template()):
+    """scalars[S0] = E_tot at xslot; scalars[JMIN] = the smallest det F."""
+    _set_sc(F, I, _JMIN, 1e300)
+    mu, lam = _sc(F, I, _MU), _sc(F, I, _LAM)
+    ti.loop_config(serialize=serial)
+    for e in range(I[_M]):
+        Fe = _deformation_gradient(F, I, xslot, e)
+        J = Fe.determinant()
+        ti.atomic_min(F[I[_SCALARS] + _JMIN], J)
+        psi = 0.0
+        if J > 0.0:
+            psi = neo_hookean_psi(Fe, mu, lam)
+        _set_f(F, I, _EE, e, _f(F, I, _VOL, e) * psi)
+    _update_cables(F, I, xslot, serial)
+    _sum(F, I, _EE, I[_M], _S0, serial)
+    body = _sc(F, I, _S0)
+    _sum(F, I, _CE, I[_C], _S0, serial)
+    cables = _sc(F, I, _S0)
+    _dot(F, I, _FEXT, xslot, _S0, serial)
+    _set_sc(F, I, _S0, body + cables - _sc(F, I, _S0))
+
+
+@ti.func
+def _gradient(F: ti.template(), I: ti.template(), serial: ti.template()):
+    """G = dE_tot/dx at X (all nodes); scalars[S0] = |G|^2 over the free DOFs."""
+    mu, lam = _sc(F, I, _MU), _sc(F, I, _LAM)
+    ti.loop_config(serialize=serial)
+    for e in range(I[_M]):
+        P = neo_hookean_P(_deformation_gradient(F, I, _X, e), mu, lam)
+        _store_element_vectors(F, I, e, _f(F, I, _VOL, e) * P @ _m2(F, I, _BM, e).transpose())
+    _update_cables(F, I, _X, serial)
+    ti.loop_config(serialize=serial)
+    for s in range(I[_S]):
+        c = I[I[_SEG] + 3 * s + 2]
+        _set_v(F, I, _SEG_VEC, s, _f(F, I, _TAU, c) * _v(F, I, _SEG_N, s))
+    _gather(F, I, _G, True, False, serial)
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        g = _v(F, I, _G, i) - _v(F, I, _FEXT, i)
+        _set_v(F, I, _G, i, g)
+        _set_v(F, I, _VOUT, i, g * _v(F, I, _MASK, i))
+    _dot(F, I, _VOUT, _VOUT, _S0, serial)
+
+
+@ti.func
+def _element_diag_block(F: ti.template(), I: ti.template(), e, k) -> mat2:
+    """The (k, k) 2x2 block of element e's Hessian."""
+    B = _m2(F, I, _BM, e)
+    gk = vec2(B[0, 0], B[0, 1])
+    if k == 2:
+        gk = vec2(B[1, 0], B[1, 1])
+    elif k == 0:
+        gk = -vec2(B[0, 0] + B[1, 0], B[0, 1] + B[1, 1])
+    D = _m4(F, I, _D, e)
+    H = mat2(0.0)
+    for a, j, b, l in ti.static(ti.ndrange(2, 2, 2, 2)):
+        H[a, b] += D[2 * a + j, 2 * b + l] * gk[j] * gk[l]
+    return _f(F, I, _VOL, e) * H
+
+
+@ti.func
+def _segment_stiffness(F: ti.template(), I: ti.template(), s) -> mat2:
+    """tau/l (I - n n^T) + kc n n^T of segment s alone (PSD)."""
+    c = I[I[_SEG] + 3 * s + 2]
+    nv = _v(F, I, _SEG_N, s)
+    l = _f(F, I, _SEG_L, s)
+    K = _f(F, I, _KC, c) * nv.outer_product(nv)
+    if l > 0.0:
+        K += _f(F, I, _TAU, c) / l * (ti.Matrix.identity(ti.f64, 2) - nv.outer_product(nv))
+    return K
+
+
+@ti.func
+def _hessian(F: ti.template(), I: ti.template(), project: ti.i32, serial: ti.template()):
+    """Element tangents D (exact, or PSD-projected if ``project``), cable stiffnesses
+    at X, and the block-Jacobi preconditioner."""
+    mu, lam = _sc(F, I, _MU), _sc(F, I, _LAM)
+    ti.loop_config(serialize=serial)
+    for e in range(I[_M]):
+        D = neo_hookean_dPdF(_deformation_gradient(F, I, _X, e), mu, lam)
+        if project != 0:
+            D = project_psd4(0.5 * (D + D.transpose()))
+        _set_m4(F, I, _D, e, D)
+    _update_cables(F, I, _X, serial)
+    floor = _sc(F, I, _FLOOR)
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        H = mat2(0.0)
+        for k in range(I[I[_NE_START] + i], I[I[_NE_START] + i + 1]):
+            ek = I[I[_NE] + k]
+            H += _element_diag_block(F, I, ek // 3, ek % 3)
+        for k in range(I[I[_NS_START] + i], I[I[_NS_START] + i + 1]):
+            cf = F[I[_NS_COEF] + k]
+            H += cf * cf * _segment_stiffness(F, I, I[I[_NS] + k])
+        Minv = spd_inverse2(H, floor)
+        if _v(F, I, _MASK, i)[0] == 0.0:
+            Minv = mat2(0.0)
+        _set_m2(F, I, _MINV, i, Minv)
+
+
+@ti.func
+def _segment_directional(F: ti.template(), I: ti.template(), src, serial: ti.template()):
+    """SEG_DD = change of each segment vector along src; CW = dL_c/dx . src."""
+    ti.loop_config(serialize=serial)
+    for s in range(I[_S]):
+        os = I[_SEG] + 3 * s
+        dd = _point(F, I, src, I[os + 1]) - _point(F, I, src, I[os])
+        _set_v(F, I, _SEG_DD, s, dd)
+        _set_f(F, I, _SEG_W, s, _v(F, I, _SEG_N, s).dot(dd))
+    ti.loop_config(serialize=serial)
+    for c in range(I[_C]):
+        w = 0.0
+        if I[_SINGLE] != 0:
+            w = _f(F, I, _SEG_W, c)
+        else:
+            for s in range(I[I[_CAB_START] + c], I[I[_CAB_START] + c + 1]):
+                w += _f(F, I, _SEG_W, s)
+        _set_f(F, I, _CW, c, w)
+
+
+@ti.func
+def _apply_hessian(F: ti.template(), I: ti.template(), src, dst, masked: ti.template(), serial: ti.template()):
+    """dst = H src, H as prepared by _hessian (``masked``: the free-free block)."""
+    ti.loop_config(serialize=serial)
+    for e in range(I[_M]):
+        ot = I[_TRI] + 3 * e
+        a, b, c = I[ot], I[ot + 1], I[ot + 2]
+        sa = _v(F, I, src, a)
+        d1 = _v(F, I, src, b) - sa
+        d2 = _v(F, I, src, c) - sa
+        B = _m2(F, I, _BM, e)
+        dP = tangent_apply(_m4(F, I, _D, e), mat2([[d1[0], d2[0]], [d1[1], d2[1]]]) @ B)
+        _store_element_vectors(F, I, e, _f(F, I, _VOL, e) * dP @ B.transpose())
+    _segment_directional(F, I, src, serial)
+    ti.loop_config(serialize=serial)
+    for s in range(I[_S]):
+        c = I[I[_SEG] + 3 * s + 2]
+        nv = _v(F, I, _SEG_N, s)
+        dd = _v(F, I, _SEG_DD, s)
+        v = _f(F, I, _KC, c) * _f(F, I, _CW, c) * nv
+        l = _f(F, I, _SEG_L, s)
+        if l > 0.0:
+            v += _f(F, I, _TAU, c) / l * (dd - nv * nv.dot(dd))
+        _set_v(F, I, _SEG_VEC, s, v)
+    _gather(F, I, dst, True, masked, serial)
+
+
+@ti.func
+def _cg_begin(F: ti.template(), I: ti.template(), warm: ti.i32, tol: ti.f64, serial: ti.template()):
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        m = _v(F, I, _MASK, i)
+        _set_v(F, I, _CB, i, _v(F, I, _CB, i) * m)
+        x0 = vec2(0.0, 0.0)
+        if warm != 0:
+            x0 = _v(F, I, _CX, i) * m
+        _set_v(F, I, _CX, i, x0)
+    _apply_hessian(F, I, _CX, _CQ, True, serial)
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        r = _v(F, I, _CB, i) - _v(F, I, _CQ, i)
+        z = _m2(F, I, _MINV, i) @ r
+        _set_v(F, I, _CR, i, r)
+        _set_v(F, I, _CZ, i, z)
+        _set_v(F, I, _CP, i, z)
+    _dot(F, I, _CR, _CZ, _RZ, serial)
+    _dot(F, I, _CR, _CR, _RR, serial)
+    _dot(F, I, _CB, _CB, _BB, serial)
+    _set_sc(F, I, _TOL2, tol * tol * _sc(F, I, _BB))
+    _set_cg(I, _ITERS, 0)
+    _set_cg(I, _NEGCURV, 0)
+    _set_cg(I, _DONE, 0)
+    if _sc(F, I, _RR) <= _sc(F, I, _TOL2):
+        _set_cg(I, _DONE, 1)
+
+
+@ti.func
+def _cg_iteration(F: ti.template(), I: ti.template(), serial: ti.template()):
+    """One PCG iteration; once done, alpha = 0 leaves the solution unchanged."""
+    _apply_hessian(F, I, _CP, _CQ, True, serial)
+    _dot(F, I, _CP, _CQ, _PQ, serial)
+    alpha = 0.0
+    if _cg(I, _DONE) == 0:
+        if _sc(F, I, _PQ) <= 0.0:
+            _set_cg(I, _NEGCURV, 1)
+            _set_cg(I, _DONE, 1)
+        else:
+            alpha = _sc(F, I, _RZ) / _sc(F, I, _PQ)
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        _set_v(F, I, _CX, i, _v(F, I, _CX, i) + alpha * _v(F, I, _CP, i))
+        r = _v(F, I, _CR, i) - alpha * _v(F, I, _CQ, i)
+        _set_v(F, I, _CR, i, r)
+        _set_v(F, I, _CZ, i, _m2(F, I, _MINV, i) @ r)
+    _dot(F, I, _CR, _CZ, _S1, serial)
+    _dot(F, I, _CR, _CR, _RR, serial)
+    beta = 0.0
+    if _cg(I, _DONE) == 0:
+        _set_cg(I, _ITERS, _cg(I, _ITERS) + 1)
+        if _sc(F, I, _RR) <= _sc(F, I, _TOL2):
+            _set_cg(I, _DONE, 1)
+        beta = _sc(F, I, _S1) / _sc(F, I, _RZ)
+        _set_sc(F, I, _RZ, _sc(F, I, _S1))
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        _set_v(F, I, _CP, i, _v(F, I, _CZ, i) + beta * _v(F, I, _CP, i))
+
+
+# ---------------------------------------------------------------- kernels
+# ``serial`` is a compile-time switch: every kernel exists at most twice per process.
+@ti.kernel
+def _k_energy(F: F64, I: I32, xslot: ti.i32, serial: ti.template()) -> vec2:
+    _energy(F, I, xslot, serial)
+    return vec2(_sc(F, I, _S0), _sc(F, I, _JMIN))
+
+
+@ti.kernel
+def _k_gradient(F: F64, I: I32, serial: ti.template()) -> ti.f64:
+    _gradient(F, I, serial)
+    return _sc(F, I, _S0)
+
+
+@ti.kernel
+def _k_hessian(F: F64, I: I32, project: ti.i32, serial: ti.template()):
+    _hessian(F, I, project, serial)
+
+
+@ti.kernel
+def _k_hessian_product(F: F64, I: I32, serial: ti.template()):
+    _apply_hessian(F, I, _VIN, _VOUT, False, serial)
+
+
+@ti.kernel
+def _k_update_cables(F: F64, I: I32, serial: ti.template()):
+    _update_cables(F, I, _X, serial)
+
+
+@ti.kernel
+def _k_cables_to_nodes(F: F64, I: I32, serial: ti.template()):
+    """VOUT = sum_c CCOEF_c dL_c/dx."""
+    _update_cables(F, I, _X, serial)
+    ti.loop_config(serialize=serial)
+    for s in range(I[_S]):
+        c = I[I[_SEG] + 3 * s + 2]
+        _set_v(F, I, _SEG_VEC, s, _f(F, I, _CCOEF, c) * _v(F, I, _SEG_N, s))
+    _gather(F, I, _VOUT, False, False, serial)
+
+
+@ti.kernel
+def _k_nodes_to_cables(F: F64, I: I32, serial: ti.template()):
+    """CW = dL_c/dx . VIN."""
+    _update_cables(F, I, _X, serial)
+    _segment_directional(F, I, _VIN, serial)
+
+
+@ti.kernel
+def _k_cg_begin(F: F64, I: I32, warm: ti.i32, tol: ti.f64, serial: ti.template()) -> ti.i32:
+    _cg_begin(F, I, warm, tol, serial)
+    return _cg(I, _DONE)
+
+
+@ti.kernel
+def _k_cg_run(F: F64, I: I32, iterations: ti.i32) -> ti.i32:
+    """A whole PCG solve in one launch (serialized models)."""
+    ti.loop_config(serialize=True)
+    for _ in range(iterations):
+        if _cg(I, _DONE) == 0:
+            _cg_iteration(F, I, True)
+    return _cg(I, _DONE)
+
+
+@ti.kernel
+def _k_cg_step(F: F64, I: I32):
+    """One PCG iteration with parallel loops."""
+    _cg_iteration(F, I, False)
+
+
+@ti.kernel
+def _k_cg_done(I: I32) -> ti.i32:
+    return _cg(I, _DONE)
+
+
+@ti.kernel
+def _k_newton_rhs(F: F64, I: I32, serial: ti.template()):
+    """CB = -G on the free DOFs."""
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        _set_v(F, I, _CB, i, -_v(F, I, _G, i) * _v(F, I, _MASK, i))
+
+
+@ti.kernel
+def _k_take_direction(F: F64, I: I32, from_cg: ti.i32, serial: ti.template()) -> ti.f64:
+    """DX = CX (or CB) on the free DOFs; return G . DX."""
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        v = _v(F, I, _CB, i)
+        if from_cg != 0:
+            v = _v(F, I, _CX, i)
+        _set_v(F, I, _DX, i, v * _v(F, I, _MASK, i))
+    _dot(F, I, _G, _DX, _S0, serial)
+    return _sc(F, I, _S0)
+
+
+@ti.kernel
+def _k_trial(F: F64, I: I32, alpha: ti.f64, serial: ti.template()):
+    """XT = X + alpha DX."""
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        _set_v(F, I, _XT, i, _v(F, I, _X, i) + alpha * _v(F, I, _DX, i))
+
+
+@ti.kernel
+def _k_copy_nodes(F: F64, I: I32, src: ti.i32, dst: ti.i32, serial: ti.template()):
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        _set_v(F, I, dst, i, _v(F, I, src, i))
+
+
+@ti.kernel
+def _k_read(F: F64, start: ti.i32, out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+    ti.loop_config(serialize=True)
+    for k in range(out.shape[0]):
+        out[k] = F[start + k]
+
+
+@ti.kernel
+def _k_write(F: F64, start: ti.i32, src: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+    ti.loop_config(serialize=True)
+    for k in range(src.shape[0]):
+        F[start + k] = src[k]
+
+
+@ti.kernel
+def _k_read_int(I: I32, start: ti.i32) -> ti.i32:
+    return I[start]
+
+
+# ---------------------------------------------------------------- host side
 @dataclass(frozen=True)
 class CGStatus:
     """Result of one PCG solve: ``iterations``, ``converged``, ``negative_curvature``
@@ -53,32 +630,21 @@ class CGStatus:
     residual: float
 
 
-def _put(field, values: np.ndarray) -> None:
-    """Copy values into a field that may be longer (padded with zeros)."""
-    values = np.asarray(values)
-    if field.shape[0] != values.shape[0]:
-        padded = np.zeros((field.shape[0],) + values.shape[1:], dtype=values.dtype)
-        padded[:len(values)] = values
-        values = padded
-    field.from_numpy(values)
-
-
 def _csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Row starts (n+1,) and the order that sorts ``keys`` (stable)."""
+    """Row starts (n+1,) and the stable order that sorts ``keys``."""
     order = np.argsort(keys, kind="stable")
-    start = np.zeros(n + 1, dtype=np.int32)
+    start = np.zeros(n + 1, dtype=np.int64)
     np.add.at(start, keys + 1, 1)
-    return np.cumsum(start).astype(np.int32), order
+    return np.cumsum(start), order
 
 
-@ti.data_oriented
 class Model:
     """Body (mesh, clamps, material) plus cables, on Taichi.
 
     Parameters: ``mesh`` rest mesh; ``fixed`` bool (n,) clamped nodes;
     ``material``; ``cables``; ``eps`` the width of the unilateral energy's
-    cubic zone; ``parallel`` forces parallel (True) or serialized (False)
-    loops, ``None`` picks by size.
+    cubic zone (strain); ``parallel`` forces parallel (True) or serialized
+    (False) loops, ``None`` picks by size.
     """
 
     def __init__(self, mesh: Mesh, fixed: np.ndarray, material: Material, cables: CableSet,
@@ -86,20 +652,14 @@ class Model:
         runtime.ensure_init()
         self.mesh, self.material, self.cables, self.eps = mesh, material, cables, float(eps)
         self.fixed = np.asarray(fixed, dtype=bool)
-        n, m = mesh.n_nodes, mesh.n_triangles
-        S, C, P = cables.n_segments, cables.n_cables, len(cables.points)
-        self.n, self.m, self.S, self.C, self.P = n, m, S, C, P
+        self.n, self.m = mesh.n_nodes, mesh.n_triangles
+        self.S, self.C, self.P = cables.n_segments, cables.n_cables, len(cables.points)
         self.single = cables.single_segment
         if parallel is None:
-            parallel = (not runtime.is_cpu()) or (m + S >= runtime.parallel_threshold())
+            parallel = (not runtime.is_cpu()) or (self.m + self.S >= runtime.parallel_threshold())
         self.parallel = bool(parallel)
         self.serial = not self.parallel
-        self.chunk_n = -(-n // _NB)
-        self.chunk_m = -(-m // _NB)
-        self.chunk_c = -(-C // _NB)
-        self._alloc()
-        self._upload()
-        self.cg_iterations_total = 0
+        self._build()
 
     @classmethod
     def from_problem(cls, problem, cables: CableSet | None = None,
@@ -110,511 +670,117 @@ class Model:
                    problem.fiber_cables if cables is None else cables,
                    eps=problem.scene.fibers.eps, parallel=parallel)
 
-    # ------------------------------------------------------------------ setup
-    def _alloc(self):
-        # Taichi fields cannot be empty: a model without cables keeps one unused slot
-        n, m = self.n, self.m
-        S, C, P = max(self.S, 1), max(self.C, 1), max(self.P, 1)
-        f64 = ti.f64
-        self.X = ti.Vector.field(2, f64, n)
-        self.x = ti.Vector.field(2, f64, n)
-        self.xt = ti.Vector.field(2, f64, n)
-        self.dx = ti.Vector.field(2, f64, n)
-        self.g = ti.Vector.field(2, f64, n)
-        self.mask = ti.Vector.field(2, f64, n)
-        self.fext = ti.Vector.field(2, f64, n)
-        self.vin = ti.Vector.field(2, f64, n)
-        self.vout = ti.Vector.field(2, f64, n)
-        self.tri = ti.Vector.field(3, ti.i32, m)
-        self.Bm = ti.Matrix.field(2, 2, f64, m)
-        self.vol = ti.field(f64, m)
-        self.D = ti.Matrix.field(4, 4, f64, m)
-        self.elem_vec = ti.Vector.field(2, f64, (m, 3))
-        self.elem_energy = ti.field(f64, m)
-        self.node_elem_start = ti.field(ti.i32, n + 1)
-        self.node_elem = ti.field(ti.i32, max(3 * m, 1))
-        # cables
-        self.pt_tri = ti.field(ti.i32, P)
-        self.pt_bary = ti.Vector.field(3, f64, P)
-        self.seg_a = ti.field(ti.i32, S)
-        self.seg_b = ti.field(ti.i32, S)
-        self.seg_cable = ti.field(ti.i32, S)
-        self.seg_n = ti.Vector.field(2, f64, S)
-        self.seg_l = ti.field(f64, S)
-        self.seg_dd = ti.Vector.field(2, f64, S)
-        self.seg_w = ti.field(f64, S)
-        self.seg_vec = ti.Vector.field(2, f64, S)
-        self.cable_start = ti.field(ti.i32, C + 1)
-        self.a0 = ti.field(f64, C)
-        self.ac = ti.field(f64, C)
-        self.EA = ti.field(f64, C)
-        self.L = ti.field(f64, C)
-        self.tau = ti.field(f64, C)
-        self.kc = ti.field(f64, C)
-        self.tau_ac = ti.field(f64, C)
-        self.cable_energy = ti.field(f64, C)
-        self.cable_w = ti.field(f64, C)
-        self.cable_coef = ti.field(f64, C)
-        n_inc = 6 * S
-        self.node_seg_start = ti.field(ti.i32, n + 1)
-        self.node_seg = ti.field(ti.i32, max(n_inc, 1))
-        self.node_seg_coef = ti.field(f64, max(n_inc, 1))
-        # PCG state
-        self.cg_b = ti.Vector.field(2, f64, n)
-        self.cg_x = ti.Vector.field(2, f64, n)
-        self.cg_r = ti.Vector.field(2, f64, n)
-        self.cg_z = ti.Vector.field(2, f64, n)
-        self.cg_p = ti.Vector.field(2, f64, n)
-        self.cg_q = ti.Vector.field(2, f64, n)
-        self.Minv = ti.Matrix.field(2, 2, f64, n)
-        self.cg_rz = ti.field(f64, ())
-        self.cg_rr = ti.field(f64, ())
-        self.cg_pq = ti.field(f64, ())
-        self.cg_bb = ti.field(f64, ())
-        self.cg_tol2 = ti.field(f64, ())
-        self.cg_iters = ti.field(ti.i32, ())
-        self.cg_done = ti.field(ti.i32, ())
-        self.cg_negcurv = ti.field(ti.i32, ())
-        # scalars
-        self.mu = ti.field(f64, ())
-        self.lam = ti.field(f64, ())
-        self.eps_f = ti.field(f64, ())
-        self.jmin = ti.field(f64, ())
-        self.s0 = ti.field(f64, ())
-        self.s1 = ti.field(f64, ())
-        self.s2 = ti.field(f64, ())
-        self.partial = ti.field(f64, _NB)
-        self.partial2 = ti.field(f64, _NB)
+    # ------------------------------------------------------------ layout and upload
+    def _build(self) -> None:
+        sizes = np.array([self.n, self.m, self.S, self.C, self.P, 1])
+        header = np.zeros(_HEADER, dtype=np.int64)
+        header[:6] = [self.n, self.m, self.S, self.C, self.P, int(self.single)]
+        self.offset: dict[str, int] = {}
+        ni = _HEADER
+        for name, unit in _INTS:
+            header[_SLOTS[name]] = self.offset[name] = ni
+            ni += int(np.dot(unit, sizes))
+        nf = 0
+        for name, unit in _FLOATS:
+            header[_SLOTS[name]] = self.offset[name] = nf
+            nf += int(np.dot(unit, sizes))
+        ih = np.zeros(ni, dtype=np.int64)
+        fh = np.zeros(nf, dtype=np.float64)
+        ih[:_HEADER] = header
+        if ni > np.iinfo(np.int32).max or nf > np.iinfo(np.int32).max:
+            raise ValueError("model too large for 32-bit offsets")
 
-    def _upload(self):
+        def put_i(name, arr):
+            a = np.asarray(arr, dtype=np.int64).ravel()
+            ih[self.offset[name]:self.offset[name] + len(a)] = a
+
+        def put_f(name, arr):
+            a = np.asarray(arr, dtype=np.float64).ravel()
+            fh[self.offset[name]:self.offset[name] + len(a)] = a
+
         mesh, cab, mat = self.mesh, self.cables, self.material
-        X = mesh.nodes.astype(np.float64)
-        T = mesh.triangles.astype(np.int32)
-        self.X.from_numpy(X)
-        self.x.from_numpy(X)
-        self.xt.from_numpy(X)
-        self.tri.from_numpy(T)
+        X, T = mesh.nodes.astype(np.float64), mesh.triangles.astype(np.int64)
+        put_i("TRI", T)
+        start, order = _csr(T.ravel(), self.n)
+        put_i("NE_START", start)
+        put_i("NE", order)  # entry = 3 e + corner
+        for name in ("X0", "X", "XT"):
+            put_f(name, X)
         Dm = np.stack([X[T[:, 1]] - X[T[:, 0]], X[T[:, 2]] - X[T[:, 0]]], axis=2)
-        self.Bm.from_numpy(np.linalg.inv(Dm))
-        area = mesh.areas
-        self.vol.from_numpy(mat.thickness * area)
-        free = (~self.fixed).astype(np.float64)
-        self.mask.from_numpy(np.repeat(free[:, None], 2, axis=1))
+        put_f("BM", np.linalg.inv(Dm))
+        put_f("VOL", mat.thickness * mesh.areas)
+        put_f("MASK", np.repeat((~self.fixed).astype(float)[:, None], 2, axis=1))
         mass = np.zeros(self.n)
-        np.add.at(mass, T.ravel(), np.repeat(mat.density * mat.thickness * area / 3.0, 3))
+        np.add.at(mass, T.ravel(), np.repeat(mat.density * mat.thickness * mesh.areas / 3.0, 3))
         self.node_mass = mass
-        self.fext.from_numpy(mass[:, None] * np.asarray(mat.gravity, dtype=float)[None, :])
-        start, order = _csr(T.ravel().astype(np.int64), self.n)
-        self.node_elem_start.from_numpy(start)
-        self.node_elem.from_numpy(order.astype(np.int32))  # entry = 3 e + k
+        put_f("FEXT", mass[:, None] * np.asarray(mat.gravity, dtype=float)[None, :])
         # cables
-        _put(self.pt_tri, cab.points.tri.astype(np.int32))
-        _put(self.pt_bary, cab.points.bary.astype(np.float64))
-        _put(self.seg_a, cab.segments[:, 0].astype(np.int32))
-        _put(self.seg_b, cab.segments[:, 1].astype(np.int32))
-        seg_cable = np.repeat(np.arange(self.C), np.diff(cab.start)).astype(np.int32)
-        _put(self.seg_cable, seg_cable)
-        _put(self.cable_start, cab.start.astype(np.int32))
-        _put(self.a0, cab.a0.astype(np.float64))
-        _put(self.ac, np.zeros(self.C))
-        _put(self.EA, cab.stiffness.astype(np.float64))
+        put_i("PT_TRI", cab.points.tri)
+        put_f("PT_BARY", cab.points.bary)
+        seg_cable = np.repeat(np.arange(self.C), np.diff(cab.start))
+        put_i("SEG", np.column_stack([cab.segments, seg_cable]) if self.S else [])
+        put_i("CAB_START", cab.start)
+        put_f("A0", cab.a0)
+        put_f("EA", cab.stiffness)
         # node <- segment incidences: end b with +bary, end a with -bary
-        pt_nodes = T[cab.points.tri]  # (P, 3)
-        nodes, segs, coefs = [], [], []
-        for end, sign in ((0, -1.0), (1, 1.0)):
-            p = cab.segments[:, end]
-            nodes.append(pt_nodes[p].ravel())
-            segs.append(np.repeat(np.arange(self.S), 3))
-            coefs.append(sign * cab.points.bary[p].ravel())
-        nodes, segs, coefs = map(np.concatenate, (nodes, segs, coefs))
-        start, order = _csr(nodes.astype(np.int64), self.n)
-        self.node_seg_start.from_numpy(start)
-        _put(self.node_seg, segs[order].astype(np.int32))
-        _put(self.node_seg_coef, coefs[order].astype(np.float64))
-        self.mu[None] = mat.mu
-        self.lam[None] = mat.lam
-        self.eps_f[None] = self.eps
-        self.precond_floor = 1e-10 * mat.mu * mat.thickness
+        pt_nodes = T[cab.points.tri] if self.P else np.zeros((0, 3), np.int64)
+        nodes = np.concatenate([pt_nodes[cab.segments[:, e]].ravel() for e in (0, 1)])
+        segs = np.tile(np.repeat(np.arange(self.S), 3), 2)
+        coefs = np.concatenate([s * cab.points.bary[cab.segments[:, e]].ravel()
+                                for e, s in ((0, -1.0), (1, 1.0))]) if self.S else np.zeros(0)
+        start, order = _csr(nodes, self.n)
+        put_i("NS_START", start)
+        put_i("NS", segs[order])
+        put_f("NS_COEF", coefs[order])
+        so = self.offset["SCALARS"]
+        fh[so + _MU], fh[so + _LAM], fh[so + _EPS] = mat.mu, mat.lam, self.eps
+        fh[so + _FLOOR] = 1e-10 * mat.mu * mat.thickness
+        self.F = ti.ndarray(ti.f64, len(fh))
+        self.I = ti.ndarray(ti.i32, len(ih))
+        self.F.from_numpy(fh)
+        self.I.from_numpy(ih.astype(np.int32))
 
-    # ------------------------------------------------------------------ Taichi functions
-    @ti.func
-    def _deformation_gradient(self, xs: ti.template(), e) -> mat2:
-        t = self.tri[e]
-        Ds = mat2([[xs[t[1]][0] - xs[t[0]][0], xs[t[2]][0] - xs[t[0]][0]],
-                   [xs[t[1]][1] - xs[t[0]][1], xs[t[2]][1] - xs[t[0]][1]]])
-        return Ds @ self.Bm[e]
+    def _read(self, name: str, count: int, at: int = 0) -> np.ndarray:
+        out = np.empty(count, dtype=np.float64)
+        if count:
+            _k_read(self.F, self.offset[name] + at, out)
+        return out
 
-    @ti.func
-    def _store_element_vectors(self, e, G: mat2):
-        """Nodal vectors of element e from dE/dDs-like G (columns: nodes 1 and 2)."""
-        c1 = vec2(G[0, 0], G[1, 0])
-        c2 = vec2(G[0, 1], G[1, 1])
-        self.elem_vec[e, 0] = -(c1 + c2)
-        self.elem_vec[e, 1] = c1
-        self.elem_vec[e, 2] = c2
+    def _write(self, name: str, values: np.ndarray, at: int = 0) -> None:
+        v = np.ascontiguousarray(values, dtype=np.float64).ravel()
+        if len(v):
+            _k_write(self.F, self.offset[name] + at, v)
 
-    @ti.func
-    def _point(self, xs: ti.template(), p) -> vec2:
-        t = self.tri[self.pt_tri[p]]
-        b = self.pt_bary[p]
-        return b[0] * xs[t[0]] + b[1] * xs[t[1]] + b[2] * xs[t[2]]
+    def _nodes(self, name: str) -> np.ndarray:
+        return self._read(name, 2 * self.n).reshape(self.n, 2)
 
-    @ti.func
-    def _update_cables(self, xs: ti.template()):
-        """Segment geometry, cable lengths, tensions, stiffnesses and energies at xs."""
-        ti.loop_config(serialize=self.serial)
-        for s in range(self.S):
-            d = self._point(xs, self.seg_b[s]) - self._point(xs, self.seg_a[s])
-            l = d.norm()
-            self.seg_l[s] = l
-            self.seg_n[s] = d / l if l > 0.0 else vec2(0.0, 0.0)
-        ti.loop_config(serialize=self.serial)
-        for c in range(self.C):
-            L = 0.0
-            if ti.static(self.single):
-                L = self.seg_l[c]
-            else:
-                for s in range(self.cable_start[c], self.cable_start[c + 1]):
-                    L += self.seg_l[s]
-            a = self.a0[c] - self.ac[c]
-            e = L / a - 1.0
-            eps = self.eps_f[None]
-            EA = self.EA[c]
-            self.L[c] = L
-            self.tau[c] = EA * zcq_d1(e, eps)
-            self.kc[c] = EA * zcq_d2(e, eps) / a
-            self.tau_ac[c] = EA * zcq_d2(e, eps) * L / (a * a)
-            self.cable_energy[c] = EA * a * zcq(e, eps)
+    def _scalar(self, k: int) -> float:
+        return float(self._read("SCALARS", 1, at=k)[0])
 
-    @ti.func
-    def _gather(self, dst: ti.template(), elems: ti.template(), masked: ti.template()):
-        """dst[i] = sum of the element vectors (if ``elems``) and the segment vectors
-        (weighted by signed barycentric coefficients) incident to node i."""
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            acc = vec2(0.0, 0.0)
-            if ti.static(elems):
-                for k in range(self.node_elem_start[i], self.node_elem_start[i + 1]):
-                    ek = self.node_elem[k]
-                    acc += self.elem_vec[ek // 3, ek % 3]
-            for k in range(self.node_seg_start[i], self.node_seg_start[i + 1]):
-                acc += self.node_seg_coef[k] * self.seg_vec[self.node_seg[k]]
-            if ti.static(masked):
-                acc *= self.mask[i]
-            dst[i] = acc
+    def _cg_state(self, k: int) -> int:
+        return int(_k_read_int(self.I, self.offset["CG_STATE"] + k))
 
-    @ti.func
-    def _dot(self, a: ti.template(), b: ti.template(), out: ti.template()):
-        """out = sum_i a_i . b_i over nodes, deterministic."""
-        ti.loop_config(serialize=self.serial)
-        for blk in range(_NB):
-            acc = 0.0
-            for i in range(blk * self.chunk_n, ti.min((blk + 1) * self.chunk_n, self.n)):
-                acc += a[i].dot(b[i])
-            self.partial[blk] = acc
-        total = 0.0
-        for blk in ti.static(range(_NB)):
-            total += self.partial[blk]
-        out[None] = total
+    # ------------------------------------------------------------ kernel calls (host handles)
+    def _energy_at(self, trial: bool) -> tuple[float, float]:
+        E, jmin = _k_energy(self.F, self.I, _XT if trial else _X, self.serial)
+        return float(E), float(jmin)
 
-    @ti.func
-    def _sum(self, arr: ti.template(), count: ti.template(), chunk: ti.template(), out: ti.template()):
-        """out = sum of arr[0:count], deterministic."""
-        ti.loop_config(serialize=self.serial)
-        for blk in range(_NB):
-            acc = 0.0
-            for i in range(blk * chunk, ti.min((blk + 1) * chunk, count)):
-                acc += arr[i]
-            self.partial[blk] = acc
-        total = 0.0
-        for blk in ti.static(range(_NB)):
-            total += self.partial[blk]
-        out[None] = total
+    def _gradient_norm2(self) -> float:
+        return float(_k_gradient(self.F, self.I, self.serial))
 
-    @ti.func
-    def _energy(self, xs: ti.template()):
-        """s0 = E_tot(xs); jmin = the smallest det F (<= 0 means inverted)."""
-        self.jmin[None] = 1e300
-        ti.loop_config(serialize=self.serial)
-        for e in range(self.m):
-            F = self._deformation_gradient(xs, e)
-            J = F.determinant()
-            ti.atomic_min(self.jmin[None], J)
-            psi = 0.0
-            if J > 0.0:
-                psi = neo_hookean_psi(F, self.mu[None], self.lam[None])
-            self.elem_energy[e] = self.vol[e] * psi
-        self._update_cables(xs)
-        self._sum(self.elem_energy, self.m, self.chunk_m, self.s0)
-        self._sum(self.cable_energy, self.C, self.chunk_c, self.s1)
-        self._dot(self.fext, xs, self.s2)
-        self.s0[None] = self.s0[None] + self.s1[None] - self.s2[None]
+    def _newton_rhs(self) -> None:
+        _k_newton_rhs(self.F, self.I, self.serial)
 
-    @ti.func
-    def _gradient(self):
-        """g = dE_tot/dx at x (all nodes); s0 = |g|^2 over free DOFs."""
-        ti.loop_config(serialize=self.serial)
-        for e in range(self.m):
-            F = self._deformation_gradient(self.x, e)
-            P = neo_hookean_P(F, self.mu[None], self.lam[None])
-            self._store_element_vectors(e, self.vol[e] * P @ self.Bm[e].transpose())
-        self._update_cables(self.x)
-        ti.loop_config(serialize=self.serial)
-        for s in range(self.S):
-            self.seg_vec[s] = self.tau[self.seg_cable[s]] * self.seg_n[s]
-        self._gather(self.g, True, False)
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            self.g[i] -= self.fext[i]
-            self.vout[i] = self.g[i] * self.mask[i]
-        self._dot(self.vout, self.vout, self.s0)
+    def _take_direction(self, from_cg: bool = True) -> float:
+        return float(_k_take_direction(self.F, self.I, 1 if from_cg else 0, self.serial))
 
-    @ti.func
-    def _element_diag_block(self, e, k) -> mat2:
-        """The (k, k) 2x2 block of element e's Hessian."""
-        B = self.Bm[e]
-        gk = vec2(B[0, 0], B[0, 1])
-        if k == 2:
-            gk = vec2(B[1, 0], B[1, 1])
-        elif k == 0:
-            gk = -vec2(B[0, 0] + B[1, 0], B[0, 1] + B[1, 1])
-        D = self.D[e]
-        H = mat2(0.0)
-        for a, j, b, l in ti.static(ti.ndrange(2, 2, 2, 2)):
-            H[a, b] += D[2 * a + j, 2 * b + l] * gk[j] * gk[l]
-        return self.vol[e] * H
+    def _trial(self, alpha: float) -> None:
+        _k_trial(self.F, self.I, float(alpha), self.serial)
 
-    @ti.func
-    def _segment_stiffness(self, s) -> mat2:
-        """tau/l (I - n n^T) + kc n n^T of segment s (its own, PSD)."""
-        c = self.seg_cable[s]
-        nv = self.seg_n[s]
-        l = self.seg_l[s]
-        K = self.kc[c] * nv.outer_product(nv)
-        if l > 0.0:
-            K += self.tau[c] / l * (ti.Matrix.identity(ti.f64, 2) - nv.outer_product(nv))
-        return K
+    def _accept(self) -> None:
+        _k_copy_nodes(self.F, self.I, _XT, _X, self.serial)
 
-    @ti.func
-    def _hessian(self, project: ti.i32):
-        """Per-element tangents D (exact, or PSD-projected if ``project``), cable
-        stiffnesses at x, and the block-Jacobi preconditioner."""
-        ti.loop_config(serialize=self.serial)
-        for e in range(self.m):
-            F = self._deformation_gradient(self.x, e)
-            D = neo_hookean_dPdF(F, self.mu[None], self.lam[None])
-            if project != 0:
-                D = project_psd4(0.5 * (D + D.transpose()))
-            self.D[e] = D
-        self._update_cables(self.x)
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            H = mat2(0.0)
-            for k in range(self.node_elem_start[i], self.node_elem_start[i + 1]):
-                ek = self.node_elem[k]
-                H += self._element_diag_block(ek // 3, ek % 3)
-            for k in range(self.node_seg_start[i], self.node_seg_start[i + 1]):
-                cf = self.node_seg_coef[k]
-                H += cf * cf * self._segment_stiffness(self.node_seg[k])
-            Minv = spd_inverse2(H, self.precond_floor)
-            if self.mask[i][0] == 0.0:
-                Minv = mat2(0.0)
-            self.Minv[i] = Minv
-
-    @ti.func
-    def _segment_directional(self, src: ti.template()):
-        """seg_dd = the change of each segment vector along src; cable_w = dL_c/dx . src."""
-        ti.loop_config(serialize=self.serial)
-        for s in range(self.S):
-            dd = self._point(src, self.seg_b[s]) - self._point(src, self.seg_a[s])
-            self.seg_dd[s] = dd
-            self.seg_w[s] = self.seg_n[s].dot(dd)
-        ti.loop_config(serialize=self.serial)
-        for c in range(self.C):
-            w = 0.0
-            if ti.static(self.single):
-                w = self.seg_w[c]
-            else:
-                for s in range(self.cable_start[c], self.cable_start[c + 1]):
-                    w += self.seg_w[s]
-            self.cable_w[c] = w
-
-    @ti.func
-    def _apply_hessian(self, src: ti.template(), dst: ti.template(), masked: ti.template()):
-        """dst = H src with H the Hessian prepared by _hessian (masked: free-free block)."""
-        ti.loop_config(serialize=self.serial)
-        for e in range(self.m):
-            t = self.tri[e]
-            dDs = mat2([[src[t[1]][0] - src[t[0]][0], src[t[2]][0] - src[t[0]][0]],
-                        [src[t[1]][1] - src[t[0]][1], src[t[2]][1] - src[t[0]][1]]])
-            B = self.Bm[e]
-            dP = tangent_apply(self.D[e], dDs @ B)
-            self._store_element_vectors(e, self.vol[e] * dP @ B.transpose())
-        self._segment_directional(src)
-        ti.loop_config(serialize=self.serial)
-        for s in range(self.S):
-            c = self.seg_cable[s]
-            nv = self.seg_n[s]
-            dd = self.seg_dd[s]
-            v = self.kc[c] * self.cable_w[c] * nv
-            l = self.seg_l[s]
-            if l > 0.0:
-                v += self.tau[c] / l * (dd - nv * nv.dot(dd))
-            self.seg_vec[s] = v
-        self._gather(dst, True, masked)
-
-    # ------------------------------------------------------------------ PCG
-    @ti.func
-    def _cg_begin(self, warm: ti.i32, tol: ti.f64):
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            self.cg_b[i] *= self.mask[i]
-            if warm == 0:
-                self.cg_x[i] = vec2(0.0, 0.0)
-            else:
-                self.cg_x[i] *= self.mask[i]
-        self._apply_hessian(self.cg_x, self.cg_q, True)
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            r = self.cg_b[i] - self.cg_q[i]
-            self.cg_r[i] = r
-            z = self.Minv[i] @ r
-            self.cg_z[i] = z
-            self.cg_p[i] = z
-        self._dot(self.cg_r, self.cg_z, self.cg_rz)
-        self._dot(self.cg_r, self.cg_r, self.cg_rr)
-        self._dot(self.cg_b, self.cg_b, self.cg_bb)
-        self.cg_tol2[None] = tol * tol * self.cg_bb[None]
-        self.cg_iters[None] = 0
-        self.cg_negcurv[None] = 0
-        self.cg_done[None] = 0
-        if self.cg_rr[None] <= self.cg_tol2[None]:
-            self.cg_done[None] = 1
-
-    @ti.func
-    def _cg_iteration(self):
-        """One PCG iteration; once done, alpha = 0 keeps the solution unchanged."""
-        self._apply_hessian(self.cg_p, self.cg_q, True)
-        self._dot(self.cg_p, self.cg_q, self.cg_pq)
-        alpha = 0.0
-        if self.cg_done[None] == 0:
-            if self.cg_pq[None] <= 0.0:
-                self.cg_negcurv[None] = 1
-                self.cg_done[None] = 1
-            else:
-                alpha = self.cg_rz[None] / self.cg_pq[None]
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            self.cg_x[i] += alpha * self.cg_p[i]
-            r = self.cg_r[i] - alpha * self.cg_q[i]
-            self.cg_r[i] = r
-            self.cg_z[i] = self.Minv[i] @ r
-        self._dot(self.cg_r, self.cg_z, self.s1)
-        self._dot(self.cg_r, self.cg_r, self.cg_rr)
-        beta = 0.0
-        if self.cg_done[None] == 0:
-            self.cg_iters[None] += 1
-            if self.cg_rr[None] <= self.cg_tol2[None]:
-                self.cg_done[None] = 1
-            beta = self.s1[None] / self.cg_rz[None]
-            self.cg_rz[None] = self.s1[None]
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            self.cg_p[i] = self.cg_z[i] + beta * self.cg_p[i]
-
-    # ------------------------------------------------------------------ kernels
-    @ti.kernel
-    def _k_energy(self, xs: ti.template()) -> vec2:
-        self._energy(xs)
-        return vec2(self.s0[None], self.jmin[None])
-
-    @ti.kernel
-    def _k_gradient(self) -> ti.f64:
-        self._gradient()
-        return self.s0[None]
-
-    @ti.kernel
-    def _k_hessian(self, project: ti.i32):
-        self._hessian(project)
-
-    @ti.kernel
-    def _k_hessian_product(self):
-        self._apply_hessian(self.vin, self.vout, False)
-
-    @ti.kernel
-    def _k_update_cables(self):
-        self._update_cables(self.x)
-
-    @ti.kernel
-    def _k_cables_to_nodes(self):
-        """vout = sum_c cable_coef_c dL_c/dx."""
-        self._update_cables(self.x)
-        ti.loop_config(serialize=self.serial)
-        for s in range(self.S):
-            self.seg_vec[s] = self.cable_coef[self.seg_cable[s]] * self.seg_n[s]
-        self._gather(self.vout, False, False)
-
-    @ti.kernel
-    def _k_nodes_to_cables(self):
-        """cable_w = dL_c/dx . vin."""
-        self._update_cables(self.x)
-        self._segment_directional(self.vin)
-
-    @ti.kernel
-    def _k_cg_begin(self, warm: ti.i32, tol: ti.f64) -> ti.i32:
-        self._cg_begin(warm, tol)
-        return self.cg_done[None]
-
-    @ti.kernel
-    def _k_cg_run(self, iterations: ti.i32) -> ti.i32:
-        ti.loop_config(serialize=True)
-        for _ in range(iterations):
-            if self.cg_done[None] == 0:
-                self._cg_iteration()
-        return self.cg_done[None]
-
-    @ti.kernel
-    def _k_cg_step(self):
-        self._cg_iteration()
-
-    @ti.kernel
-    def _k_cg_done(self) -> ti.i32:
-        return self.cg_done[None]
-
-    @ti.kernel
-    def _k_newton_rhs(self):
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            self.cg_b[i] = -self.g[i] * self.mask[i]
-
-    @ti.kernel
-    def _k_take_direction(self) -> ti.f64:
-        """dx = cg_x; return g . dx over free DOFs."""
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            self.dx[i] = self.cg_x[i] * self.mask[i]
-        self._dot(self.g, self.dx, self.s0)
-        return self.s0[None]
-
-    @ti.kernel
-    def _k_directional(self) -> ti.f64:
-        """g . dx over free DOFs (dx already masked)."""
-        self._dot(self.g, self.dx, self.s0)
-        return self.s0[None]
-
-    @ti.kernel
-    def _k_trial(self, alpha: ti.f64):
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            self.xt[i] = self.x[i] + alpha * self.dx[i]
-
-    @ti.kernel
-    def _k_accept(self):
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            self.x[i] = self.xt[i]
-
-    # ------------------------------------------------------------------ public API (numpy)
+    # ------------------------------------------------------------ public API (numpy)
     @property
     def dofs(self) -> int:
         """Number of free degrees of freedom."""
@@ -622,131 +788,134 @@ class Model:
 
     def positions(self) -> np.ndarray:
         """Current node positions x (n, 2), m."""
-        return self.x.to_numpy()
+        return self._nodes("X")
 
     def set_positions(self, x: np.ndarray) -> None:
         """Set node positions (n, 2); clamped nodes are reset to their rest position."""
         x = np.array(x, dtype=np.float64).reshape(self.n, 2)
         x[self.fixed] = self.mesh.nodes[self.fixed]
-        self.x.from_numpy(x)
+        self._write("X", x)
+
+    def set_free_positions(self, x: np.ndarray) -> None:
+        """Set all node positions, clamped ones included (for derivative checks)."""
+        self._write("X", np.asarray(x, dtype=np.float64).reshape(self.n, 2))
 
     def reset(self) -> None:
         """Back to the rest positions."""
-        self.x.copy_from(self.X)
+        _k_copy_nodes(self.F, self.I, _X0, _X, self.serial)
 
     def contraction(self) -> np.ndarray:
         """Cable contractions ac (C,), m."""
-        return self.ac.to_numpy()[:self.C]
+        return self._read("AC", self.C)
 
     def set_contraction(self, ac: np.ndarray) -> None:
-        """Set cable contractions ac (C,), m; a = a0 - ac must stay positive."""
+        """Set cable contractions ac (C,), m; the rest length a0 - ac must stay positive."""
         ac = np.asarray(ac, dtype=np.float64).reshape(self.C)
         if np.any(ac >= self.cables.a0):
             raise ValueError("a contraction reaches the cable's rest length")
-        _put(self.ac, ac)
+        self._write("AC", ac)
 
     def energy(self, x: np.ndarray | None = None) -> float:
         """E_tot (J) at x (default: the current positions); +inf if a triangle is inverted."""
         if x is not None:
-            self.xt.from_numpy(np.asarray(x, dtype=np.float64).reshape(self.n, 2))
-        E, jmin = self._k_energy(self.xt if x is not None else self.x)
-        return float(E) if jmin > 0.0 else float("inf")
+            self._write("XT", np.asarray(x, dtype=np.float64).reshape(self.n, 2))
+        E, jmin = self._energy_at(trial=x is not None)
+        return E if jmin > 0.0 else float("inf")
 
     def gradient(self, x: np.ndarray | None = None) -> np.ndarray:
-        """dE_tot/dx (n, 2), N, at x (default: current positions), all nodes."""
+        """dE_tot/dx (n, 2), N, at x (default: current positions), all nodes; a given
+        x becomes the current positions."""
         if x is not None:
             self.set_free_positions(x)
-        self._k_gradient()
-        return self.g.to_numpy()
-
-    def set_free_positions(self, x: np.ndarray) -> None:
-        """Set all node positions, clamped ones included (for derivative checks)."""
-        self.x.from_numpy(np.asarray(x, dtype=np.float64).reshape(self.n, 2))
+        self._gradient_norm2()
+        return self._nodes("G")
 
     def prepare_hessian(self, project: bool = False) -> None:
-        """Compute the element tangents (exact or PSD-projected) at the current x."""
-        self._k_hessian(1 if project else 0)
+        """Element tangents (exact or PSD-projected), cable stiffnesses and the
+        preconditioner at the current x."""
+        _k_hessian(self.F, self.I, 1 if project else 0, self.serial)
 
     def hessian_product(self, v: np.ndarray, project: bool = False,
                         prepare: bool = True) -> np.ndarray:
         """H v (n, 2) for v (n, 2): the exact (or projected) Hessian of E_tot at x."""
         if prepare:
             self.prepare_hessian(project)
-        self.vin.from_numpy(np.asarray(v, dtype=np.float64).reshape(self.n, 2))
-        self._k_hessian_product()
-        return self.vout.to_numpy()
+        self._write("VIN", np.asarray(v, dtype=np.float64).reshape(self.n, 2))
+        _k_hessian_product(self.F, self.I, self.serial)
+        return self._nodes("VOUT")
 
     def cable_state(self) -> dict[str, np.ndarray]:
         """Per cable at the current x: length ``L`` (m), rest length ``a`` (m), strain
         ``e``, tension ``tau`` (N), ``kc`` = dtau/dL (N/m), ``tau_ac`` = dtau/dac (N/m)."""
-        self._k_update_cables()
-        C = self.C
-        L = self.L.to_numpy()[:C]
-        a = self.cables.a0 - self.ac.to_numpy()[:C]
-        return {"L": L, "a": a, "e": L / a - 1.0, "tau": self.tau.to_numpy()[:C],
-                "kc": self.kc.to_numpy()[:C], "tau_ac": self.tau_ac.to_numpy()[:C]}
+        _k_update_cables(self.F, self.I, self.serial)
+        L = self._read("L", self.C)
+        a = self.cables.a0 - self._read("AC", self.C)
+        return {"L": L, "a": a, "e": L / a - 1.0, "tau": self._read("TAU", self.C),
+                "kc": self._read("KC", self.C), "tau_ac": self._read("TAU_AC", self.C)}
 
     def tensions(self) -> np.ndarray:
         """Cable tensions tau (C,), N, at the current x."""
-        self._k_update_cables()
-        return self.tau.to_numpy()[:self.C]
+        _k_update_cables(self.F, self.I, self.serial)
+        return self._read("TAU", self.C)
 
     def length_jacobian_product(self, w: np.ndarray) -> np.ndarray:
         """sum_c w_c dL_c/dx, (n, 2), for w (C,)."""
-        _put(self.cable_coef, np.asarray(w, dtype=np.float64).reshape(self.C))
-        self._k_cables_to_nodes()
-        return self.vout.to_numpy()
+        self._write("CCOEF", np.asarray(w, dtype=np.float64).reshape(self.C))
+        _k_cables_to_nodes(self.F, self.I, self.serial)
+        return self._nodes("VOUT")
 
     def length_jacobian_transpose_product(self, v: np.ndarray) -> np.ndarray:
         """dL_c/dx . v, (C,), for v (n, 2)."""
-        self.vin.from_numpy(np.asarray(v, dtype=np.float64).reshape(self.n, 2))
-        self._k_nodes_to_cables()
-        return self.cable_w.to_numpy()[:self.C]
+        self._write("VIN", np.asarray(v, dtype=np.float64).reshape(self.n, 2))
+        _k_nodes_to_cables(self.F, self.I, self.serial)
+        return self._read("CW", self.C)
 
     def mixed_product(self, w: np.ndarray) -> np.ndarray:
         """(d2E/dx dac) w, (n, 2), for w (C,) in m."""
-        st = self.cable_state()
-        return self.length_jacobian_product(st["tau_ac"] * np.asarray(w, dtype=np.float64))
+        tau_ac = self.cable_state()["tau_ac"]
+        return self.length_jacobian_product(tau_ac * np.asarray(w, dtype=np.float64))
 
     def mixed_transpose_product(self, v: np.ndarray) -> np.ndarray:
         """(d2E/dx dac)^T v, (C,), for v (n, 2)."""
-        st = self.cable_state()
-        return st["tau_ac"] * self.length_jacobian_transpose_product(v)
+        tau_ac = self.cable_state()["tau_ac"]
+        return tau_ac * self.length_jacobian_transpose_product(v)
 
-    # ------------------------------------------------------------------ linear solves
+    # ------------------------------------------------------------ linear solves
     def cg_solve(self, rhs: np.ndarray | None, tol: float, max_iter: int,
                  warm: bool = False, check_every: int = 8) -> CGStatus:
         """Solve H y = rhs on the free DOFs with block-Jacobi PCG, H as last prepared.
 
-        ``rhs`` (n, 2) is copied into the solver (None: it is already there);
-        the solution stays in the solver (``cg_solution``). ``tol`` is relative to
-        |rhs|; ``warm`` starts from the previous solution."""
+        ``rhs`` (n, 2) is copied in (None: already in place, as for Newton); the
+        solution stays in the solver (:meth:`cg_solution`). ``tol`` is relative
+        to |rhs|; ``warm`` starts from the previous solution."""
         if rhs is not None:
-            self.cg_b.from_numpy(np.asarray(rhs, dtype=np.float64).reshape(self.n, 2))
-        done = self._k_cg_begin(1 if warm else 0, float(tol))
+            self._write("CB", np.asarray(rhs, dtype=np.float64).reshape(self.n, 2))
+        done = _k_cg_begin(self.F, self.I, 1 if warm else 0, float(tol), self.serial)
         if not done:
             if self.serial:
-                self._k_cg_run(int(max_iter))
+                _k_cg_run(self.F, self.I, int(max_iter))
             else:
                 launched = 0
                 while launched < max_iter:
                     k = min(check_every, max_iter - launched)
                     for _ in range(k):
-                        self._k_cg_step()
+                        _k_cg_step(self.F, self.I)
                     launched += k
-                    if self._k_cg_done():
+                    if _k_cg_done(self.I):
                         break
-        it = int(self.cg_iters[None])
-        self.cg_iterations_total += it
-        bb = self.cg_bb[None]
-        res = float(np.sqrt(self.cg_rr[None] / bb)) if bb > 0 else 0.0
-        return CGStatus(it, bool(res <= tol), bool(self.cg_negcurv[None]), res)
+        sc = self._read("SCALARS", 13)
+        it = self._cg_state(_ITERS)
+        res = float(np.sqrt(sc[_RR] / sc[_BB])) if sc[_BB] > 0 else 0.0
+        return CGStatus(it, bool(res <= tol), bool(self._cg_state(_NEGCURV)), res)
 
     def cg_solution(self) -> np.ndarray:
-        return self.cg_x.to_numpy()
+        return self._nodes("CX")
 
     def hessian_data(self) -> dict[str, np.ndarray]:
         """What the direct backend assembles from (after prepare_hessian)."""
-        return {"D": self.D.to_numpy(), "Bm": self.Bm.to_numpy(), "vol": self.vol.to_numpy(),
-                "seg_n": self.seg_n.to_numpy()[:self.S], "seg_l": self.seg_l.to_numpy()[:self.S],
-                "tau": self.tau.to_numpy()[:self.C], "kc": self.kc.to_numpy()[:self.C]}
+        m, S, C = self.m, self.S, self.C
+        return {"D": self._read("D", 16 * m).reshape(m, 4, 4),
+                "Bm": self._read("BM", 4 * m).reshape(m, 2, 2), "vol": self._read("VOL", m),
+                "seg_n": self._read("SEG_N", 2 * S).reshape(S, 2), "seg_l": self._read("SEG_L", S),
+                "tau": self._read("TAU", C), "kc": self._read("KC", C)}
+

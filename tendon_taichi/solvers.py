@@ -82,10 +82,10 @@ class CGSolver:
     def newton_direction(self, eta: float, project: bool) -> tuple[float, bool, int]:
         m = self.model
         m.prepare_hessian(project)
-        m._k_newton_rhs()
+        m._newton_rhs()
         st = m.cg_solve(None, tol=eta, max_iter=self.max_iter)
         self._count(st)
-        return m._k_take_direction(), st.negative_curvature, st.iterations
+        return m._take_direction(), st.negative_curvature, st.iterations
 
     def solve(self, rhs: np.ndarray, tol: float, warm: bool = False,
               prepare: bool = True) -> np.ndarray:
@@ -193,15 +193,15 @@ class DirectSolver:
     def newton_direction(self, eta: float, project: bool) -> tuple[float, bool, int]:
         m = self.model
         H = self.assemble(project)
-        g = m.g.to_numpy().ravel()[self.free]
+        g = m._nodes("G").ravel()[self.free]
         try:
             y = self._factor_solve(H, -g)
         except np.linalg.LinAlgError:
             return 0.0, True, 0
         dx = np.zeros(2 * m.n)
         dx[self.free] = y
-        m.dx.from_numpy(dx.reshape(m.n, 2))
-        return m._k_directional(), False, 0
+        m._write("CX", dx)
+        return m._take_direction(), False, 0
 
     def solve(self, rhs: np.ndarray, tol: float = 0.0, warm: bool = False,
               prepare: bool = True) -> np.ndarray:
@@ -254,14 +254,14 @@ class NewtonSolver:
         if x0 is not None:
             m.set_positions(x0)
         lin0 = self.linear.stats.iterations
-        E, jmin = m._k_energy(m.x)
+        E, jmin = m._energy_at(trial=False)
         if jmin <= 0.0:
             raise ConvergenceError("the starting state has an inverted triangle")
         F = self.force_scale
         projected = 0
         gnorm = np.inf
         for it in range(self.max_iter + 1):
-            gnorm = float(np.sqrt(m._k_gradient()))
+            gnorm = float(np.sqrt(m._gradient_norm2()))
             if gnorm <= self.tol * F:
                 break
             if it == self.max_iter:
@@ -283,9 +283,8 @@ class NewtonSolver:
 
     def _steepest_descent(self) -> float:
         m = self.model
-        m._k_newton_rhs()
-        m.dx.copy_from(m.cg_b)
-        return m._k_directional()
+        m._newton_rhs()
+        return m._take_direction(from_cg=False)
 
     def _line_search(self, E: float, slope: float, gnorm: float) -> float:
         """Backtrack from the full step until Armijo holds with no inverted triangle;
@@ -294,10 +293,10 @@ class NewtonSolver:
         slack = 1e-12 * (abs(E) + 1e-3 * self.energy_scale)  # energy round-off
         alpha = 1.0
         for _ in range(60):
-            m._k_trial(alpha)
-            E_new, jmin = m._k_energy(m.xt)
+            m._trial(alpha)
+            E_new, jmin = m._energy_at(trial=True)
             if jmin > 0.0 and E_new <= E + 1e-4 * alpha * slope + slack:
-                m._k_accept()
+                m._accept()
                 return float(E_new)
             alpha *= 0.5
         raise ConvergenceError(

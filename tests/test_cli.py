@@ -1,0 +1,95 @@
+"""The command line as a user runs it: outputs, formats and bad input."""
+
+import json
+from importlib.metadata import entry_points
+
+import numpy as np
+import pytest
+from test_scene import BAD
+
+from tendon_taichi.export import EXPORT_KEYS
+
+
+def test_console_script_is_installed():
+    eps = [e for e in entry_points(group="console_scripts") if e.name == "tendon-taichi"]
+    assert eps and eps[0].value == "tendon_taichi.cli:main"
+
+
+def test_scenes_lists_builtins(cli):
+    r = cli("scenes")
+    assert r.returncode == 0
+    names = [line.split()[0] for line in r.stdout.splitlines()]
+    assert {"t_shape", "finger", "gripper"} <= set(names)
+    data = json.loads(cli("scenes", "--json").stdout)
+    assert {s["name"] for s in data["scenes"]} >= {"t_shape", "finger", "gripper"}
+
+
+def test_simulate_writes_export_vtu_and_json(cli, tmp_path):
+    import meshio
+
+    out, vtu = tmp_path / "o.npz", tmp_path / "o.vtu"
+    r = cli("simulate", "finger", "--uniform", 0.05, "--export", out, "--vtu", vtu, "--json")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)  # stdout holds only the JSON
+    for key in ("scene", "resolution", "nodes", "triangles", "fibers", "dofs", "newton_iterations",
+                "linear_iterations", "residual", "pose_error", "time_s", "export"):
+        assert key in summary
+    assert summary["residual"] <= 1e-10 and summary["scene"] == "finger"
+    d = np.load(out)
+    assert set(EXPORT_KEYS) <= set(d.files)
+    assert d["x"].shape == d["nodes"].shape and len(d["tau"]) == len(d["fibers"]) == len(d["a0"])
+    assert np.allclose(d["ac"], 0.05 * d["a0"])
+    assert float(d["youngs_modulus"]) == 5e4 and float(d["eps"]) == 0.01
+    m = meshio.read(vtu)
+    types = [c.type for c in m.cells]
+    assert types == ["triangle", "line"]
+    assert np.allclose(m.cell_data["tension"][1], d["tau"])
+    assert np.allclose(m.point_data["displacement"][: len(d["x"]), :2], d["x"] - d["nodes"])
+
+
+def test_contract_file_equals_uniform(cli, tmp_path):
+    a, b = tmp_path / "a.npz", tmp_path / "b.npz"
+    assert cli("simulate", "finger", "--uniform", 0.04, "--export", a).returncode == 0
+    ratios = np.full(len(np.load(a)["a0"]), 0.04)
+    np.save(tmp_path / "r.npy", ratios)
+    r = cli("simulate", "finger", "--contract", tmp_path / "r.npy", "--export", b, "--solver", "direct")
+    assert r.returncode == 0, r.stderr
+    assert np.abs(np.load(a)["x"] - np.load(b)["x"]).max() <= 1e-9
+
+
+def _assert_one_line_error(r, message):
+    assert r.returncode != 0
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith("tendon-taichi: error:") and message in lines[0], lines[0]
+    assert "Traceback" not in r.stderr and r.stdout == ""
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_malformed_scene_gives_one_line_and_writes_nothing(cli, tmp_path, case):
+    text, message = BAD[case]
+    (tmp_path / "bad.toml").write_text(text)
+    out = tmp_path / "out.npz"
+    r = cli("simulate", tmp_path / "bad.toml", "--uniform", 0.05, "--export", out)
+    _assert_one_line_error(r, message)
+    assert list(tmp_path.iterdir()) == [tmp_path / "bad.toml"]
+
+
+@pytest.mark.parametrize("args,message", [
+    (["simulate", "nope", "--uniform", 0.1], "unknown scene 'nope'"),
+    (["simulate", "t_shape", "--uniform", 0.5], "must lie in [-0.5, 0.33]"),
+    (["simulate", "t_shape", "--uniform", 0.1, "--resolution", 0], "--resolution must be >= 1"),
+    (["simulate", "t_shape"], "one of the arguments --uniform --contract is required"),
+    (["simulate", "t_shape", "--contract", "missing.npy"], "does not exist"),
+    (["simulate", "t_shape", "--uniform", 0.1, "--solver", "lu"], "invalid choice"),
+    (["frobnicate"], "invalid choice"),
+])
+def test_bad_command_lines(cli, tmp_path, args, message):
+    _assert_one_line_error(cli(*args, cwd=tmp_path), message)
+    assert not (tmp_path / "recordings").exists()
+
+
+def test_wrong_length_contract_file(cli, tmp_path):
+    np.save(tmp_path / "r.npy", np.zeros(7))
+    r = cli("simulate", "t_shape", "--contract", tmp_path / "r.npy", cwd=tmp_path)
+    _assert_one_line_error(r, "has 548 fibers")

@@ -1,0 +1,128 @@
+"""The equilibrium: force balance from the export alone, backends agree, warm starts,
+Newton iteration counts, determinism, and clear non-convergence."""
+
+import numpy as np
+import pytest
+from conftest import small_scene_toml
+from reference import body_forces, fiber_forces, gravity_forces
+
+from tendon_taichi import (ConvergenceError, Model, NewtonSolver, build_problem, load_scene,
+                           parse_scene)
+
+
+def _residual_from_export(path):
+    """Free-DOF force residual / largest nodal force, from the .npz alone (numpy)."""
+    d = np.load(path)
+    X, T, x = d["nodes"], d["triangles"], d["x"]
+    fb = body_forces(X, T, x, float(d["youngs_modulus"]), float(d["poisson_ratio"]),
+                     float(d["thickness"]))
+    ff = fiber_forces(T, x, d["fiber_nodes_tri"], d["fiber_nodes_bary"], d["fibers"], d["tau"])
+    fg = gravity_forces(X, T, float(d["thickness"]), float(d["density"]), d["gravity"])
+    total = fb + ff + fg
+    free = ~d["fixed"]
+    scale = max(np.linalg.norm(f, axis=1).max() for f in (fb, ff, fg))
+    return np.linalg.norm(total[free], axis=1).max() / scale, scale
+
+
+@pytest.mark.parametrize("level", [1, 3])
+def test_force_balance_from_export(cli, tmp_path, level):
+    out = tmp_path / f"t{level}.npz"
+    r = cli("simulate", "t_shape", "--resolution", level, "--uniform", 0.1, "--export", out)
+    assert r.returncode == 0, r.stderr
+    res, scale = _residual_from_export(out)
+    assert scale > 0.1  # real forces, newtons
+    assert res <= 1e-8, res
+    d = np.load(out)
+    # and no inverted triangle
+    X, T, x = d["nodes"], d["triangles"], d["x"]
+    det = lambda p: np.linalg.det(np.stack([p[T[:, 1]] - p[T[:, 0]], p[T[:, 2]] - p[T[:, 0]]], -1))  # noqa: E731
+    assert det(x).min() > 0 and det(X).min() > 0
+
+
+def test_force_balance_with_gravity(tmp_path, cli):
+    toml = small_scene_toml(11, extra="density = 1100.0\ngravity = [0.0, -9.81]")
+    scene = tmp_path / "grav.toml"
+    scene.write_text(toml)
+    out = tmp_path / "grav.npz"
+    r = cli("simulate", scene, "--uniform", 0.05, "--export", out, "--solver", "direct")
+    assert r.returncode == 0, r.stderr
+    res, _ = _residual_from_export(out)
+    assert res <= 1e-8
+    d = np.load(out)
+    assert np.abs(gravity_forces(d["nodes"], d["triangles"], 0.01, 1100.0, d["gravity"])).max() > 0
+
+
+@pytest.mark.parametrize("scene,level", [("t_shape", 1), ("t_shape", 2), ("gripper", 1)])
+def test_cg_and_direct_agree(scene, level):
+    p = build_problem(load_scene(scene), level)
+    m = Model.from_problem(p)
+    ac = 0.08 * p.fibers.a0
+    xs = {}
+    for solver in ("cg", "direct"):
+        m.reset()
+        eq = NewtonSolver(m, solver).solve(ac=ac)
+        assert eq.residual <= 1e-10
+        xs[solver] = eq.x
+    assert np.abs(xs["cg"] - xs["direct"]).max() <= 1e-8 * p.size
+
+
+@pytest.mark.parametrize("solver", ["cg", "direct"])
+def test_warm_start_takes_fewer_newton_iterations(solver):
+    p = build_problem(load_scene("t_shape"), 1)
+    m = Model.from_problem(p)
+    newton = NewtonSolver(m, solver)
+    rng = np.random.default_rng(0)
+    ac1 = rng.uniform(0.0, 0.1, p.fibers.n_fibers) * p.fibers.a0
+    ac2 = ac1 * (1 + 0.01 * rng.uniform(-1, 1, len(ac1)))
+    newton.solve(ac=ac1, x0=p.mesh.nodes)
+    warm = newton.solve(ac=ac2)  # from the previous equilibrium
+    cold = newton.solve(ac=ac2, x0=p.mesh.nodes)
+    assert warm.newton_iterations < cold.newton_iterations
+    assert np.abs(warm.x - cold.x).max() <= 1e-8 * p.size
+
+
+@pytest.mark.parametrize("solver", ["cg", "direct"])
+def test_newton_from_rest_iteration_count(solver):
+    """Exact Hessian first (DESIGN.md section 4): t_shape level 2, uniform 0.05."""
+    p = build_problem(load_scene("t_shape"), 2)
+    m = Model.from_problem(p)
+    eq = NewtonSolver(m, solver).solve(ac=0.05 * p.fibers.a0)
+    assert eq.newton_iterations <= 20
+    assert eq.residual <= 1e-10
+
+
+def test_serial_and_parallel_loops_agree():
+    p = build_problem(load_scene("gripper"), 1)
+    ac = 0.06 * p.fibers.a0
+    xs = []
+    for parallel in (False, True):
+        m = Model.from_problem(p, parallel=parallel)
+        assert m.parallel == parallel
+        xs.append(NewtonSolver(m, "cg").solve(ac=ac).x)
+    assert np.abs(xs[0] - xs[1]).max() <= 1e-9 * p.size
+
+
+def test_solves_are_deterministic():
+    p = build_problem(load_scene("t_shape"), 1)
+    m = Model.from_problem(p)
+    newton = NewtonSolver(m, "cg")
+    a = newton.solve(ac=0.07 * p.fibers.a0, x0=p.mesh.nodes)
+    b = newton.solve(ac=0.07 * p.fibers.a0, x0=p.mesh.nodes)
+    assert np.array_equal(a.x, b.x) and a.newton_iterations == b.newton_iterations
+
+
+def test_non_convergence_is_a_clear_error():
+    p = build_problem(load_scene("t_shape"), 1)
+    m = Model.from_problem(p)
+    with pytest.raises(ConvergenceError, match=r"did not converge: relative force residual .* after 2 Newton"):
+        NewtonSolver(m, "cg", max_iter=2).solve(ac=0.1 * p.fibers.a0)
+
+
+def test_large_contraction_keeps_triangles_valid():
+    p = build_problem(parse_scene(small_scene_toml(21)), 1)
+    m = Model.from_problem(p)
+    eq = NewtonSolver(m, "cg").solve(ac=0.33 * p.fibers.a0)
+    T = p.mesh.triangles
+    x = eq.x
+    assert np.linalg.det(np.stack([x[T[:, 1]] - x[T[:, 0]], x[T[:, 2]] - x[T[:, 0]]], -1)).min() > 0
+    assert eq.residual <= 1e-10
