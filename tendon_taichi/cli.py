@@ -104,6 +104,7 @@ def cmd_simulate(args) -> int:
           file=sys.stderr)
     model = Model.from_problem(problem)
     newton = NewtonSolver(model, args.solver)
+    args.solver = newton.linear.name
     ac = ratios * problem.fibers.a0
     eq = newton.solve(ac=ac)
     write_export(export, problem, eq.x, ac, eq.tau)
@@ -142,6 +143,118 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+# ------------------------------------------------------------------ optimize
+#: command-line flags of the [optimize] settings: flag -> (key, type, help)
+OPTIMIZE_FLAGS = {
+    "--sparsity": ("sparsity", float, "L0 sparsity weight w_sp"),
+    "--continuity": ("continuity", float, "directional continuity weight w_ct"),
+    "--contraction-reg": ("contraction_reg", float, "contraction regularizer weight w_ac"),
+    "--tension-scale": ("tension_scale", float, "tension scale tau_ref, N"),
+    "--initial-contraction": ("initial_contraction", float, "uniform starting ratio r0"),
+    "--active-threshold": ("active_threshold", float, "active if tau > this x tau_ref"),
+    "--sparsity-measure": ("sparsity_measure", str, "length (default) or count"),
+    "--continuity-measure": ("continuity_measure", str, "length (default) or count"),
+    "--stage-iterations": ("stage_iterations", int, "L-BFGS-B iteration cap per stage"),
+    "--k0": ("k0", float, "first homotopy k, N"),
+    "--k-factor": ("factor", float, "k <- k * factor per stage"),
+    "--k-min": ("k_min", float, "stop once k falls below this, N"),
+}
+
+
+def _stage_table(stages: list[dict], L: float) -> list[str]:
+    rows = [f"{'stage':>5} {'k':>8} {'iter':>5} {'pose error':>18} {'active':>7} {'length':>9} "
+            f"{'tau max':>8} {'time':>7}"]
+    for s in stages:
+        k = "-" if s["k"] is None else f"{s['k']:.4g}"
+        rows.append(f"{s['stage']:>5} {k:>8} {s['iterations']:>5} "
+                    f"{1e3 * s['pose_error']:>8.3f} mm {100 * s['pose_error_rel']:>5.2f}% "
+                    f"{s['active_fibers']:>7} {100 * s['active_length']:>6.1f} cm {s['tau_max']:>6.3f} N "
+                    f"{s['time_s']:>6.1f}s")
+    return rows
+
+
+def cmd_optimize(args) -> int:
+    from .plots import plot_stages
+    from .runs import Interrupted, Progress, _resolve, optimize
+    from .scene import load_scene, with_overrides
+
+    overrides = {key: getattr(args, flag[2:].replace("-", "_"))
+                 for flag, (key, _, _) in OPTIMIZE_FLAGS.items()}
+    given = [f for f, (k, _, _) in OPTIMIZE_FLAGS.items() if overrides[k] is not None]
+    if args.resume:
+        if given:
+            raise InputError(f"{given[0]} cannot be changed when resuming (the recorded settings are used)")
+        scene = None
+    else:
+        if args.scene is None:
+            raise InputError("a SCENE is required (or --resume RUN.rrd)")
+        scene = with_overrides(load_scene(args.scene), overrides)
+    if args.log_every < 1:
+        raise InputError(f"--log-every must be >= 1 (got {args.log_every})")
+    try:
+        result = optimize(scene, args.resolution, args.solver, record=args.record, export=args.export,
+                          log_every=args.log_every, progress=Progress(enabled=not args.quiet),
+                          resume=args.resume)
+    except Interrupted as exc:
+        if args.json not in (None, "-"):
+            _json_out(args, exc.summary)
+        raise
+    if args.resume and scene is None and args.scene is not None and args.scene != result.problem.scene.name:
+        print(f"{PROG}: warning: the recording is of scene '{result.problem.scene.name}', not "
+              f"'{args.scene}'", file=sys.stderr)
+    summary = result.summary
+    if args.png is not None:
+        png = Path(args.png if args.png != "-" else result.recording.with_suffix(".png"))
+        first, last = result.stages[0], result.stages[-1]
+        from .optimizer import SoftIK
+        panels = []
+        for title, st in ((f"stage 0 (unregularized): {first.figures.active_fibers} active", first),
+                          (f"final stage {last.stage}: {last.figures.active_fibers} active", last)):
+            x = st.x
+            if x is None:
+                x = _resolve(SoftIK(result.problem, result.problem.scene.optimize, args.solver), st)
+            panels.append((title, x, st.tau))
+        s = result.problem.scene.optimize
+        plot_stages(png, result.problem, panels, s.active_threshold * s.tension_scale, s.tension_scale)
+        summary["png"] = str(png)
+    for w in result.warnings:
+        print(f"{PROG}: warning: {w}", file=sys.stderr)
+    _json_out(args, summary)
+    if args.json == "-":
+        return 0
+    c = result.problem.counts()
+    print(f"{summary['scene']} level {summary['resolution']}: {c['nodes']} nodes, {c['triangles']} "
+          f"triangles, {c['fibers']} fibers, {c['dofs']} DOFs, L = {100 * summary['body_size']:.2f} cm")
+    print("\n".join(_stage_table(summary["stages"], summary["body_size"])))
+    print(f"total {summary['time_s']:.1f} s; recording: {summary['recording']}; export: {summary['export']}"
+          + (f"; png: {summary['png']}" if "png" in summary else ""))
+    return 0
+
+
+def cmd_replay(args) -> int:
+    from .runs import replay
+
+    out = replay(args.recording, stage=args.stage, solver=args.solver)
+    _json_out(args, out)
+    if args.json != "-":
+        print(f"{out['recording']}: {out['scene']} level {out['resolution']}"
+              + (" (truncated file: read its complete part)" if out["truncated"] else ""))
+        print(f"{'stage':>5} {'k':>8} {'recorded pose error':>20} {'recomputed':>14} {'rel. diff':>10} "
+              f"{'active rec/now':>15}")
+        for r in out["stages"]:
+            k = "-" if r["k"] is None else f"{r['k']:.4g}"
+            flag = "ok" if r["reproduces"] else "MISMATCH"
+            print(f"{r['stage']:>5} {k:>8} {1e3 * r['recorded_pose_error']:>17.6f} mm "
+                  f"{1e3 * r['pose_error']:>11.6f} mm {r['pose_error_rel_diff']:>10.1e} "
+                  f"{r['recorded_active_fibers']:>7}/{r['active_fibers']:<7} {flag}")
+    if not out["reproduces"]:
+        bad = [str(r["stage"]) for r in out["stages"] if not r["reproduces"]]
+        print(f"{PROG}: replay: stage(s) {', '.join(bad)} do not reproduce the recorded figures",
+              file=sys.stderr)
+        return 3
+    return 0
+
+
 # ------------------------------------------------------------------ main
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description="Design the tendon layout of a 2D soft robot.")
@@ -162,13 +275,41 @@ def build_parser() -> argparse.ArgumentParser:
                    help="contract every fiber by the ratio C of its rest length")
     g.add_argument("--contract", metavar="FILE.npy",
                    help="per-fiber contraction ratios (ac/a0), one per fiber")
-    s.add_argument("--solver", choices=("cg", "direct"), default="cg",
-                   help="linear solver: matrix-free Taichi PCG (default) or sparse direct")
+    s.add_argument("--solver", choices=("auto", "cg", "direct"), default="auto",
+                   help="linear solver: matrix-free Taichi PCG, sparse direct, or auto (default: "
+                        "picks by problem size)")
     s.add_argument("--export", metavar="OUT.npz",
                    help="problem export (default recordings/<scene>-r<N>-simulate.npz)")
     s.add_argument("--vtu", metavar="OUT.vtu", help="also write the deformed mesh and fibers as VTU")
     _add_json(s)
     s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("optimize", help="regularized soft IK with the L0 homotopy, recorded to rerun")
+    s.add_argument("scene", metavar="SCENE", nargs="?", help="built-in scene name or scene TOML file")
+    s.add_argument("--resolution", type=int, default=1, metavar="N", help="resolution level (default 1)")
+    s.add_argument("--record", metavar="RUN.rrd", help="recording (default recordings/<scene>-r<N>.rrd)")
+    s.add_argument("--export", metavar="OUT.npz", help="final problem export (default: beside the recording)")
+    s.add_argument("--solver", choices=("auto", "cg", "direct"), default="auto",
+                   help="linear solver of equilibria and adjoints (default auto: by problem size)")
+    s.add_argument("--resume", metavar="RUN.rrd",
+                   help="continue an interrupted run from its last completed stage (into --record, "
+                        "default the same file)")
+    s.add_argument("--png", nargs="?", const="-", metavar="FILE",
+                   help="picture of the stage-0 and final tension patterns (default: beside the recording)")
+    s.add_argument("--log-every", type=int, default=1, metavar="N",
+                   help="record the geometry every N-th iteration (scalars every iteration)")
+    s.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    for flag, (key, typ, text) in OPTIMIZE_FLAGS.items():
+        s.add_argument(flag, type=typ, default=None, help=f"{text} (scene [optimize] {key})")
+    _add_json(s)
+    s.set_defaults(func=cmd_optimize)
+
+    s = sub.add_parser("replay", help="re-solve a recording's stages and check they reproduce")
+    s.add_argument("recording", metavar="RUN.rrd")
+    s.add_argument("--stage", type=int, default=None, metavar="N", help="only this stage")
+    s.add_argument("--solver", choices=("auto", "cg", "direct"), default="auto")
+    _add_json(s)
+    s.set_defaults(func=cmd_replay)
     return p
 
 

@@ -614,6 +614,17 @@ def _k_write(F: F64, start: ti.i32, src: ti.types.ndarray(dtype=ti.f64, ndim=1))
 
 
 @ti.kernel
+def _k_read_ranges(F: F64, ranges: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                   out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+    """out[dst:dst+len] = F[start:start+len] for each row (start, len, dst)."""
+    ti.loop_config(serialize=True)
+    for r in range(ranges.shape[0]):
+        start, length, dst = ranges[r, 0], ranges[r, 1], ranges[r, 2]
+        for k in range(length):
+            out[dst + k] = F[start + k]
+
+
+@ti.kernel
 def _k_read_int(I: I32, start: ti.i32) -> ti.i32:
     return I[start]
 
@@ -735,6 +746,8 @@ class Model:
         so = self.offset["SCALARS"]
         fh[so + _MU], fh[so + _LAM], fh[so + _EPS] = mat.mu, mat.lam, self.eps
         fh[so + _FLOOR] = 1e-10 * mat.mu * mat.thickness
+        self.Bm = np.linalg.inv(Dm)
+        self.vol = mat.thickness * mesh.areas
         self.F = ti.ndarray(ti.f64, len(fh))
         self.I = ti.ndarray(ti.i32, len(ih))
         self.F.from_numpy(fh)
@@ -750,6 +763,16 @@ class Model:
         v = np.ascontiguousarray(values, dtype=np.float64).ravel()
         if len(v):
             _k_write(self.F, self.offset[name] + at, v)
+
+    def _read_many(self, items: list[tuple[str, int]]) -> list[np.ndarray]:
+        """Several arrays (name, count) in one kernel launch."""
+        counts = [c for _, c in items]
+        dst = np.concatenate([[0], np.cumsum(counts)])
+        ranges = np.array([[self.offset[n], c, d] for (n, c), d in zip(items, dst[:-1])], dtype=np.int32)
+        out = np.empty(int(dst[-1]), dtype=np.float64)
+        if len(out):
+            _k_read_ranges(self.F, ranges, out)
+        return [out[a:b] for a, b in zip(dst[:-1], dst[1:])]
 
     def _nodes(self, name: str) -> np.ndarray:
         return self._read(name, 2 * self.n).reshape(self.n, 2)
@@ -848,10 +871,10 @@ class Model:
         """Per cable at the current x: length ``L`` (m), rest length ``a`` (m), strain
         ``e``, tension ``tau`` (N), ``kc`` = dtau/dL (N/m), ``tau_ac`` = dtau/dac (N/m)."""
         _k_update_cables(self.F, self.I, self.serial)
-        L = self._read("L", self.C)
-        a = self.cables.a0 - self._read("AC", self.C)
-        return {"L": L, "a": a, "e": L / a - 1.0, "tau": self._read("TAU", self.C),
-                "kc": self._read("KC", self.C), "tau_ac": self._read("TAU_AC", self.C)}
+        C = self.C
+        L, ac, tau, kc, tau_ac = self._read_many([("L", C), ("AC", C), ("TAU", C), ("KC", C), ("TAU_AC", C)])
+        a = self.cables.a0 - ac
+        return {"L": L, "a": a, "e": L / a - 1.0, "tau": tau, "kc": kc, "tau_ac": tau_ac}
 
     def tensions(self) -> np.ndarray:
         """Cable tensions tau (C,), N, at the current x."""
@@ -914,8 +937,8 @@ class Model:
     def hessian_data(self) -> dict[str, np.ndarray]:
         """What the direct backend assembles from (after prepare_hessian)."""
         m, S, C = self.m, self.S, self.C
-        return {"D": self._read("D", 16 * m).reshape(m, 4, 4),
-                "Bm": self._read("BM", 4 * m).reshape(m, 2, 2), "vol": self._read("VOL", m),
-                "seg_n": self._read("SEG_N", 2 * S).reshape(S, 2), "seg_l": self._read("SEG_L", S),
-                "tau": self._read("TAU", C), "kc": self._read("KC", C)}
+        D, seg_n, seg_l, tau, kc = self._read_many([("D", 16 * m), ("SEG_N", 2 * S), ("SEG_L", S),
+                                                    ("TAU", C), ("KC", C)])
+        return {"D": D.reshape(m, 4, 4), "Bm": self.Bm, "vol": self.vol,
+                "seg_n": seg_n.reshape(S, 2), "seg_l": seg_l, "tau": tau, "kc": kc}
 

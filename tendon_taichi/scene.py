@@ -237,7 +237,7 @@ def _as_point(v, where: str) -> tuple[float, float]:
     return (float(v[0]), float(v[1]))
 
 
-def _read_body(r: _Reader, base_dir: Path | None) -> Body:
+def _read_body(r: _Reader, base_dir: Path | None, check_files: bool = True) -> Body:
     from .geometry import normalize_polygon, polygon_self_intersects, polygons_overlap
 
     E = r.number("youngs_modulus", Material.youngs_modulus, gt=0.0)
@@ -258,7 +258,7 @@ def _read_body(r: _Reader, base_dir: Path | None) -> Body:
         mesh_file = Path(name)
         if not mesh_file.is_absolute():
             mesh_file = (base_dir or Path.cwd()) / mesh_file
-        if not mesh_file.is_file():
+        if check_files and not mesh_file.is_file():
             raise SceneError(f"{r.origin}: body.mesh file '{mesh_file}' does not exist")
         if r.has("holes"):
             raise SceneError(f"{r.origin}: body.holes cannot be combined with body.mesh")
@@ -337,8 +337,10 @@ def _array_of_tables(doc: _Reader, key: str) -> list[dict]:
 
 
 def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None,
-                default_name: str = "scene") -> Scene:
-    """Parse and validate scene TOML ``text``; ``origin`` names it in errors."""
+                default_name: str = "scene", check_files: bool = True) -> Scene:
+    """Parse and validate scene TOML ``text``; ``origin`` names it in errors.
+    ``check_files=False`` accepts a mesh file that is not there (a recorded run
+    carries its mesh)."""
     try:
         doc_raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -349,7 +351,7 @@ def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None
         raise SceneError(f"{origin}: 'name' must be a non-empty string")
     if not doc.has("body"):
         raise SceneError(f"{origin}: a [body] table is required")
-    body = _read_body(_Reader(doc.raw("body"), "body", origin), base_dir)
+    body = _read_body(_Reader(doc.raw("body"), "body", origin), base_dir, check_files)
     fibers = _read_fibers(_Reader(doc.raw("fibers") if doc.has("fibers") else {}, "fibers", origin))
 
     fixed = []
@@ -406,3 +408,24 @@ def load_scene(name_or_path: str | Path) -> Scene:
 def optimize_keys() -> list[str]:
     """The keys of the [optimize] table (for CLI overrides and sweeps)."""
     return [f.name for f in fields(OptimizeSettings)]
+
+
+def with_overrides(scene: Scene, overrides: dict, origin: str = "command line") -> Scene:
+    """A copy of ``scene`` with [optimize] settings replaced, validated like the file.
+
+    ``overrides`` maps optimize keys (``homotopy`` keys as ``k0``, ``factor``,
+    ``k_min``) to values; None values are ignored."""
+    table = {k: v for k, v in scene.optimize.__dict__.items() if k != "homotopy"}
+    hom = dict(scene.optimize.homotopy.__dict__)
+    for key, value in overrides.items():
+        if value is None:
+            continue
+        if key in hom:
+            hom[key] = value
+        elif key in table:
+            table[key] = value
+        else:
+            raise SceneError(f"{origin}: unknown optimize setting '{key}'")
+    table["homotopy"] = hom
+    opt = _read_optimize(_Reader(table, "optimize", origin), scene.fibers)
+    return replace(scene, optimize=opt)

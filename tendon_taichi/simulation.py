@@ -48,7 +48,7 @@ def contraction_ratios(problem: Problem, ratios) -> np.ndarray:
     return r
 
 
-def simulate(scene: Scene | str, level: int = 1, ratios=0.0, solver: str = "cg",
+def simulate(scene: Scene | str, level: int = 1, ratios=0.0, solver: str = "auto",
              tol: float = 1e-10) -> Simulation:
     """Solve the equilibrium of ``scene`` at ``level`` with every fiber contracted by
     ``ratios`` (scalar or (f,)) of its rest length."""

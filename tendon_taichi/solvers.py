@@ -20,7 +20,7 @@ matrix and factorized with SuperLU.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -30,7 +30,20 @@ import scipy.sparse.linalg as spla
 from .errors import ConvergenceError, InputError
 from .model import CGStatus, Model
 
-SOLVERS = ("cg", "direct")
+SOLVERS = ("auto", "cg", "direct")
+
+#: ``auto`` takes the direct backend up to this many free DOFs (measured on the
+#: 2-core CPU machine: direct is faster for t_shape levels 1-5, up to 10504 DOFs)
+AUTO_DIRECT_MAX_DOFS = 20000
+
+
+def resolve_solver(name: str, dofs: int) -> str:
+    """The backend that ``name`` stands for at this size (``auto`` picks by DOFs)."""
+    if name == "auto":
+        return "direct" if dofs <= AUTO_DIRECT_MAX_DOFS else "cg"
+    if name not in SOLVERS:
+        raise InputError(f"unknown solver '{name}' (choose from {', '.join(SOLVERS)})")
+    return name
 
 
 @dataclass
@@ -50,9 +63,12 @@ class Equilibrium:
 
 @dataclass
 class LinearStats:
+    """Counts: ``solves`` (factorizations or CG solves), ``iterations`` (CG),
+    ``reused`` (direct steps with an earlier factorization)."""
+
     solves: int = 0
     iterations: int = 0
-    history: list = field(default_factory=list)
+    reused: int = 0
 
 
 class LinearSolver(Protocol):
@@ -60,9 +76,10 @@ class LinearSolver(Protocol):
 
     name: str
 
-    def newton_direction(self, eta: float, project: bool) -> tuple[float, bool, int]:
+    def newton_direction(self, eta: float, project: bool, fresh: bool = True) -> tuple[float, bool, int]:
         """Solve H dx = -g (H exact or projected, at the model's x) into the model's
-        Newton direction; return (g . dx, met negative curvature, iterations)."""
+        Newton direction; return (g . dx, met negative curvature, iterations).
+        ``fresh=False`` allows a backend to reuse the Hessian of a nearby state."""
 
     def solve(self, rhs: np.ndarray, tol: float) -> np.ndarray:
         """y (n, 2) with H y = rhs on the free DOFs (exact H at x, zero on fixed DOFs)."""
@@ -79,7 +96,7 @@ class CGSolver:
         self.stats = LinearStats()
         self.last: CGStatus | None = None
 
-    def newton_direction(self, eta: float, project: bool) -> tuple[float, bool, int]:
+    def newton_direction(self, eta: float, project: bool, fresh: bool = True) -> tuple[float, bool, int]:
         m = self.model
         m.prepare_hessian(project)
         m._newton_rhs()
@@ -106,7 +123,10 @@ class CGSolver:
 
 
 class DirectSolver:
-    """The model's Hessian assembled as a scipy sparse matrix, factorized by SuperLU."""
+    """The model's Hessian assembled as a scipy sparse matrix, factorized by SuperLU.
+
+    The sparsity pattern (free DOFs only) and the scatter map from element and
+    cable entries to it are built once; an assembly then only computes values."""
 
     name = "direct"
 
@@ -114,90 +134,113 @@ class DirectSolver:
         self.model = model
         self.stats = LinearStats()
         self.free = np.repeat(~model.fixed, 2)
-        self._pattern = self._build_pattern()
+        self.factor = None  # the last factorization, reused by chord steps and predictors
+        self.factor_exact = False
+        self._build_structure()
 
-    def _build_pattern(self):
-        """Global DOF indices of every element and cable-segment Hessian entry."""
+    def _build_structure(self) -> None:
         m = self.model
         T = m.mesh.triangles
-        edofs = (2 * T[:, :, None] + np.arange(2)[None, None, :]).reshape(-1, 6)  # (m, 6)
         cab = m.cables
-        pt_nodes = T[cab.points.tri]
+        edofs = (2 * T[:, :, None] + np.arange(2)).reshape(-1, 6)  # (m, 6)
+        pt_nodes = T[cab.points.tri] if m.P else np.zeros((0, 3), np.int64)
         seg_nodes = np.concatenate([pt_nodes[cab.segments[:, 0]], pt_nodes[cab.segments[:, 1]]], 1)
-        seg_coef = np.concatenate([-cab.points.bary[cab.segments[:, 0]],
-                                   cab.points.bary[cab.segments[:, 1]]], 1)  # (S, 6)
-        sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)[None, None, :]).reshape(-1, 12)
-        return edofs, sdofs, seg_coef
+        self.seg_coef = np.concatenate([-cab.points.bary[cab.segments[:, 0]],
+                                        cab.points.bary[cab.segments[:, 1]]], 1)  # (S, 6)
+        sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)  # (S, 12)
+        rows = [np.repeat(edofs, 6, axis=1).ravel(), np.repeat(sdofs, 12, axis=1).ravel()]
+        cols = [np.tile(edofs, (1, 6)).ravel(), np.tile(sdofs, (1, 12)).ravel()]
+        # the axial part couples all the segments of a cable (one block per cable)
+        self.cable_dofs = [sdofs[cab.start[c]:cab.start[c + 1]].ravel() for c in range(m.C)]
+        for g in self.cable_dofs:
+            rows.append(np.repeat(g, len(g)))
+            cols.append(np.tile(g, len(g)))
+        r, c = np.concatenate(rows), np.concatenate(cols)
+        free_index = np.cumsum(self.free) - 1
+        self.keep = self.free[r] & self.free[c]
+        r, c = free_index[r[self.keep]], free_index[c[self.keep]]
+        nf = int(self.free.sum())
+        key = c.astype(np.int64) * nf + r
+        uniq, self.pos = np.unique(key, return_inverse=True)
+        self.indices = (uniq % nf).astype(np.int32)
+        self.indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
+        self.shape = (nf, nf)
+        self.nnz = len(uniq)
 
-    def assemble(self, project: bool = False, prepare: bool = True) -> sp.csr_matrix:
-        """The Hessian of E_tot at x restricted to the free DOFs (exact or projected)."""
+    def _values(self, d: dict) -> np.ndarray:
+        """Every Hessian entry in pattern order (elements, segments, cable blocks)."""
         m = self.model
-        if prepare:
-            m.prepare_hessian(project)
-        d = m.hessian_data()
-        edofs, sdofs, coef = self._pattern
-        # element Hessians vol * B^T D B, B = d vec(F) / d x_local (4 x 6)
         Bm = d["Bm"]
-        G = np.stack([-(Bm[:, 0] + Bm[:, 1]), Bm[:, 0], Bm[:, 1]], axis=1)  # (m, 3, 2)
-        B = np.zeros((m.m, 4, 6))
+        G = np.stack([-(Bm[:, 0] + Bm[:, 1]), Bm[:, 0], Bm[:, 1]], axis=1)  # (m, 3, 2) shape gradients
+        B = np.zeros((m.m, 4, 6))  # d vec(F) / d x_local
         for i in range(2):
             for j in range(2):
                 B[:, 2 * i + j, i::2] = G[:, :, j]
-        He = d["vol"][:, None, None] * np.einsum("eri,ers,esj->eij", B, d["D"], B)
-        rows = [np.repeat(edofs, 6, axis=1).ravel()]
-        cols = [np.tile(edofs, (1, 6)).ravel()]
+        He = d["vol"][:, None, None] * (np.swapaxes(B, 1, 2) @ (d["D"] @ B))
         vals = [He.ravel()]
         if m.S:
             n_s, l_s = d["seg_n"], d["seg_l"]
             seg_cable = np.repeat(np.arange(m.C), np.diff(m.cables.start))
-            tau, kc = d["tau"][seg_cable], d["kc"]
-            # geometric part of each segment: tau/l (I - n n^T) through the 12 DOFs
             with np.errstate(divide="ignore", invalid="ignore"):
-                geo = np.where(l_s > 0, tau / l_s, 0.0)[:, None, None] * (
-                    np.eye(2)[None] - n_s[:, :, None] * n_s[:, None, :])
-            cc = coef[:, :, None] * coef[:, None, :]  # (S, 6, 6)
-            Ks = np.einsum("sab,sij->saibj", cc, geo).reshape(-1, 12, 12)
-            rows.append(np.repeat(sdofs, 12, axis=1).ravel())
-            cols.append(np.tile(sdofs, (1, 12)).ravel())
-            vals.append(Ks.ravel())
-            # axial part kc (dL/dx)(dL/dx)^T per cable, dL/dx = sum over its segments
-            grad = (coef[:, :, None] * n_s[:, None, :]).reshape(-1, 12)  # (S, 12)
+                t_over_l = np.where(l_s > 0, d["tau"][seg_cable] / l_s, 0.0)
+            geo = t_over_l[:, None, None] * (np.eye(2) - n_s[:, :, None] * n_s[:, None, :])
+            cc = self.seg_coef[:, :, None] * self.seg_coef[:, None, :]
+            vals.append((cc[:, :, None, :, None] * geo[:, None, :, None, :]).reshape(-1))
+            grad = (self.seg_coef[:, :, None] * n_s[:, None, :]).reshape(-1, 12)  # dL/dx per segment
+            kc = d["kc"]
             if m.single:
-                rows.append(np.repeat(sdofs, 12, axis=1).ravel())
-                cols.append(np.tile(sdofs, (1, 12)).ravel())
                 vals.append((kc[:, None, None] * grad[:, :, None] * grad[:, None, :]).ravel())
             else:
-                starts = m.cables.start
-                for c in np.flatnonzero(kc > 0):
-                    s0, s1 = starts[c], starts[c + 1]
-                    gdofs, gv = sdofs[s0:s1].ravel(), grad[s0:s1].ravel()
-                    rows.append(np.repeat(gdofs, len(gdofs)))
-                    cols.append(np.tile(gdofs, len(gdofs)))
+                st = m.cables.start
+                for c in range(m.C):
+                    gv = grad[st[c]:st[c + 1]].ravel()
                     vals.append(kc[c] * np.outer(gv, gv).ravel())
-        N = 2 * m.n
-        H = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(N, N)).tocsr()
-        return H[self.free][:, self.free]
+        return np.concatenate(vals)
 
-    def _factor_solve(self, H: sp.csr_matrix, b: np.ndarray) -> np.ndarray:
+    def assemble(self, project: bool = False, prepare: bool = True) -> sp.csc_matrix:
+        """The Hessian of E_tot at x on the free DOFs (exact or projected), CSC."""
+        if prepare:
+            self.model.prepare_hessian(project)
+        vals = self._values(self.model.hessian_data())[self.keep]
+        data = np.bincount(self.pos, weights=vals, minlength=self.nnz)
+        return sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape)
+
+    def _factor_solve(self, H: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
         try:
-            lu = spla.splu(H.tocsc(), permc_spec="MMD_AT_PLUS_A")
+            lu = spla.splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
+                           options={"SymmetricMode": True})
         except RuntimeError as exc:  # exactly singular
             raise np.linalg.LinAlgError(str(exc)) from None
         y = lu.solve(b)
+        res = b - H @ y
+        if np.linalg.norm(res) > 1e-10 * np.linalg.norm(b):  # one step of iterative refinement
+            y += lu.solve(res)
         if not np.all(np.isfinite(y)):
             raise np.linalg.LinAlgError("non-finite solution")
         self.stats.solves += 1
+        self.factor = lu
         return y
 
-    def newton_direction(self, eta: float, project: bool) -> tuple[float, bool, int]:
+    def solve_last(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve with the last factorization (the Hessian it was made from), full (n, 2)."""
+        out = np.zeros(2 * self.model.n)
+        out[self.free] = self.factor.solve(np.asarray(rhs, dtype=float).ravel()[self.free])
+        return out.reshape(-1, 2)
+
+    def newton_direction(self, eta: float, project: bool, fresh: bool = True) -> tuple[float, bool, int]:
+        """With ``fresh=False`` and a factorization at hand (of the exact Hessian at a
+        nearby state), reuse it: a chord step costing one triangular solve."""
         m = self.model
-        H = self.assemble(project)
         g = m._nodes("G").ravel()[self.free]
-        try:
-            y = self._factor_solve(H, -g)
-        except np.linalg.LinAlgError:
-            return 0.0, True, 0
+        if not fresh and not project and self.factor is not None and self.factor_exact:
+            y = self.factor.solve(-g)
+            self.stats.reused += 1
+        else:
+            try:
+                y = self._factor_solve(self.assemble(project), -g)
+            except np.linalg.LinAlgError:
+                return 0.0, True, 0
+            self.factor_exact = not project
         dx = np.zeros(2 * m.n)
         dx[self.free] = y
         m._write("CX", dx)
@@ -211,13 +254,15 @@ class DirectSolver:
             y = self._factor_solve(H, b)
         except np.linalg.LinAlgError as exc:
             raise ConvergenceError(f"the Hessian is singular: {exc}") from None
+        self.factor_exact = True
         out = np.zeros(2 * self.model.n)
         out[self.free] = y
         return out.reshape(-1, 2)
 
 
 def make_linear_solver(name: str, model: Model) -> LinearSolver:
-    """A linear backend by name: ``cg`` or ``direct``."""
+    """A linear backend by name: ``cg``, ``direct`` or ``auto``."""
+    name = resolve_solver(name, model.dofs)
     if name == "cg":
         return CGSolver(model)
     if name == "direct":
@@ -230,23 +275,32 @@ class NewtonSolver:
 
     ``tol``: relative force tolerance (|g_free| / F); ``force_scale`` F in N
     (default E h L); ``max_iter`` Newton iterations; ``eta_max`` caps the
-    forcing term (relative tolerance of each linear solve).
+    forcing term (relative tolerance of each linear solve); ``reuse`` lets the
+    direct backend reuse its last factorization (chord steps) while the residual
+    keeps shrinking at least by ``chord_ratio`` per step - for sequences of nearby
+    solves, as in the optimizer.
     """
 
-    def __init__(self, model: Model, solver: str | LinearSolver = "cg", tol: float = 1e-10,
-                 max_iter: int = 100, force_scale: float | None = None, eta_max: float = 0.01):
+    def __init__(self, model: Model, solver: str | LinearSolver = "auto", tol: float = 1e-10,
+                 max_iter: int = 100, force_scale: float | None = None, eta_max: float = 0.01,
+                 reuse: bool = False):
         self.model = model
         self.linear = make_linear_solver(solver, model) if isinstance(solver, str) else solver
         self.tol = tol
         self.max_iter = max_iter
         self.eta_max = eta_max
+        #: a step with a reused Hessian must shrink the residual at least this much
+        self.chord_ratio = 0.5
+        self.reuse = reuse
         mat = model.material
         self.force_scale = force_scale or mat.youngs_modulus * mat.thickness * model.mesh.size
         self.energy_scale = self.force_scale * model.mesh.size
 
-    def solve(self, ac: np.ndarray | None = None, x0: np.ndarray | None = None) -> Equilibrium:
+    def solve(self, ac: np.ndarray | None = None, x0: np.ndarray | None = None,
+              tol: float | None = None) -> Equilibrium:
         """Equilibrium for contractions ``ac`` (C,) m (default: as set), starting from
-        ``x0`` (n, 2) (default: the model's current positions: a warm start)."""
+        ``x0`` (n, 2) (default: the model's current positions: a warm start), to the
+        relative force tolerance ``tol`` (default: the solver's)."""
         t0 = time.perf_counter()
         m = self.model
         if ac is not None:
@@ -258,24 +312,31 @@ class NewtonSolver:
         if jmin <= 0.0:
             raise ConvergenceError("the starting state has an inverted triangle")
         F = self.force_scale
+        tol = self.tol if tol is None else tol
         projected = 0
-        gnorm = np.inf
+        gnorm, fresh = np.inf, False
         for it in range(self.max_iter + 1):
-            gnorm = float(np.sqrt(m._gradient_norm2()))
-            if gnorm <= self.tol * F:
+            previous, gnorm = gnorm, float(np.sqrt(m._gradient_norm2()))
+            if gnorm <= tol * F:
                 break
             if it == self.max_iter:
                 raise ConvergenceError(
                     f"equilibrium did not converge: relative force residual {gnorm / F:.2e} "
-                    f"after {it} Newton iterations (tolerance {self.tol:.1e})")
+                    f"after {it} Newton iterations (tolerance {tol:.1e})")
+            # a reused Hessian (chord step) must keep contracting fast, else refresh it
+            fresh = fresh or not self.reuse or gnorm > self.chord_ratio * previous
             eta = min(self.eta_max, np.sqrt(gnorm / F))
-            slope, negcurv, _ = self.linear.newton_direction(eta, project=False)
+            slope, negcurv, _ = self.linear.newton_direction(eta, project=False, fresh=fresh)
+            if (negcurv or not slope < 0.0) and not fresh:
+                fresh = True
+                slope, negcurv, _ = self.linear.newton_direction(eta, project=False, fresh=True)
             if negcurv or not slope < 0.0:
                 projected += 1
                 slope, negcurv, _ = self.linear.newton_direction(eta, project=True)
                 if negcurv or not slope < 0.0:
                     slope = self._steepest_descent()
             E = self._line_search(E, slope, gnorm)
+            fresh = False
         return Equilibrium(x=m.positions(), tau=m.tensions(), energy=float(E),
                            residual=gnorm / F, newton_iterations=it,
                            linear_iterations=self.linear.stats.iterations - lin0,

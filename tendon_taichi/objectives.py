@@ -1,0 +1,172 @@
+"""Objective terms over the fiber contractions (DESIGN.md section 3).
+
+Each term is evaluated at an equilibrium ``x*(ac)`` and returns its value and
+its partial derivatives with respect to the node positions ``x`` (directly),
+the tensions ``tau`` and the contractions ``ac`` (explicitly). The optimizer
+chains them: tensions depend on both ``x`` and ``ac``
+(``dtau/dx = kc dL/dx``, ``dtau/dac = tau_ac``), and the ``x`` part goes
+through one adjoint solve.
+
+* ``pose``: ``O_pos = sum_p |x_p - x'_p|^2 / L^2`` (targets are embedded material points);
+* ``sparsity``: ``O_sp = w_sp sum_i m_i s_k(tau_i)`` with the smoothstep
+  ``s_k(t) = 3u^2 - 2u^3``, ``u = t/k`` on ``0 < t < k`` (0 below, 1 above);
+  ``m_i = a0_i / L`` ("length") or 1 ("count");
+* ``continuity``: ``O_ct = w_ct sum_(a,b) m_ab cos^2(theta_ab) ((tau_a - tau_b)/tau_ref)^2``
+  over fiber pairs sharing a node, ``m_ab = (a0_a + a0_b) / (2L)`` or 1;
+* ``contraction``: ``O_reg = w_ac sum_i (ac_i / a0_i)^2``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from .problem import Problem
+
+
+@dataclass
+class TermValue:
+    """A term's value and partial derivatives (None where it does not depend):
+    ``dx`` (n, 2) w.r.t. node positions, ``dtau`` (C,), ``dac`` (C,) explicit."""
+
+    value: float
+    dx: np.ndarray | None = None
+    dtau: np.ndarray | None = None
+    dac: np.ndarray | None = None
+
+
+@dataclass
+class State:
+    """An equilibrium to evaluate terms at: positions ``x`` (n, 2), contractions
+    ``ac`` (C,) m, tensions ``tau`` (C,) N."""
+
+    x: np.ndarray
+    ac: np.ndarray
+    tau: np.ndarray
+
+
+class Term(Protocol):
+    """An objective term: a ``name`` and ``evaluate(state) -> TermValue``."""
+
+    name: str
+
+    def evaluate(self, state: State) -> TermValue: ...
+
+
+def smoothstep(t: np.ndarray, k: float) -> tuple[np.ndarray, np.ndarray]:
+    """s_k(t) and s_k'(t): 0 for t <= 0, 3u^2 - 2u^3 (u = t/k) on (0, k), 1 for t >= k."""
+    u = np.clip(np.asarray(t, dtype=float) / k, 0.0, 1.0)
+    s = u * u * (3.0 - 2.0 * u)
+    ds = np.where((u > 0.0) & (u < 1.0), 6.0 * u * (1.0 - u) / k, 0.0)
+    return s, ds
+
+
+class PoseTerm:
+    """O_pos = sum_p |x_p - goal_p|^2 / L^2."""
+
+    name = "pose"
+
+    def __init__(self, problem: Problem):
+        self.problem = problem
+        self.L2 = problem.size ** 2
+
+    def evaluate(self, state: State) -> TermValue:
+        p = self.problem
+        diff = p.target_positions(state.x) - p.target_goal  # (t, 2)
+        dx = np.zeros_like(state.x)
+        corners = p.mesh.triangles[p.target.tri]  # (t, 3)
+        for j in range(3):
+            np.add.at(dx, corners[:, j], (2.0 / self.L2) * p.target.bary[:, j:j + 1] * diff)
+        return TermValue(float((diff * diff).sum() / self.L2), dx=dx)
+
+
+class SparsityTerm:
+    """O_sp = weight sum_i m_i s_k(tau_i); ``k`` (N) is set per homotopy stage."""
+
+    name = "sparsity"
+
+    def __init__(self, problem: Problem, weight: float, measure: str = "length", k: float = 1.0):
+        self.weight, self.k = weight, k
+        self.m = problem.fibers.a0 / problem.size if measure == "length" else np.ones(problem.fibers.n_fibers)
+
+    def evaluate(self, state: State) -> TermValue:
+        s, ds = smoothstep(state.tau, self.k)
+        return TermValue(float(self.weight * np.dot(self.m, s)), dtau=self.weight * self.m * ds)
+
+
+class ContinuityTerm:
+    """O_ct = weight sum_(a,b) m_ab cos^2_ab ((tau_a - tau_b)/tau_ref)^2."""
+
+    name = "continuity"
+
+    def __init__(self, problem: Problem, weight: float, tension_scale: float, measure: str = "length"):
+        pairs = problem.fibers.pairs
+        self.a, self.b = pairs.fibers[:, 0], pairs.fibers[:, 1]
+        a0 = problem.fibers.a0
+        m = (a0[self.a] + a0[self.b]) / (2.0 * problem.size) if measure == "length" else 1.0
+        self.c = weight * m * pairs.cos2 / tension_scale ** 2
+        self.n_fibers = problem.fibers.n_fibers
+
+    def evaluate(self, state: State) -> TermValue:
+        d = state.tau[self.a] - state.tau[self.b]
+        g = 2.0 * self.c * d
+        dtau = np.bincount(self.a, g, self.n_fibers) - np.bincount(self.b, g, self.n_fibers)
+        return TermValue(float(np.dot(self.c, d * d)), dtau=dtau)
+
+
+class ContractionTerm:
+    """O_reg = weight sum_i (ac_i / a0_i)^2."""
+
+    name = "contraction"
+
+    def __init__(self, problem: Problem, weight: float):
+        self.weight, self.a0 = weight, problem.fibers.a0
+
+    def evaluate(self, state: State) -> TermValue:
+        r = state.ac / self.a0
+        return TermValue(float(self.weight * np.dot(r, r)), dac=2.0 * self.weight * r / self.a0)
+
+
+@dataclass
+class Evaluation:
+    """The summed objective at a state: ``total``, ``terms`` (value per name), and the
+    summed partials ``dx`` (n, 2), ``dtau`` (C,), ``dac`` (C,)."""
+
+    total: float
+    terms: dict[str, float]
+    dx: np.ndarray
+    dtau: np.ndarray
+    dac: np.ndarray
+
+
+class Objective:
+    """The sum of its terms; only the terms named in ``active`` count in this stage
+    (the others report 0: stage 0 is plain soft IK)."""
+
+    def __init__(self, terms: list[Term]):
+        self.terms = list(terms)
+        self.active = {t.name for t in self.terms}
+
+    def term(self, name: str):
+        return next(t for t in self.terms if t.name == name)
+
+    def evaluate(self, state: State) -> Evaluation:
+        n, C = state.x.shape[0], state.tau.shape[0]
+        dx, dtau, dac = np.zeros((n, 2)), np.zeros(C), np.zeros(C)
+        values, total = {}, 0.0
+        for t in self.terms:
+            if t.name not in self.active:
+                values[t.name] = 0.0
+                continue
+            tv = t.evaluate(state)
+            values[t.name] = tv.value
+            total += tv.value
+            if tv.dx is not None:
+                dx += tv.dx
+            if tv.dtau is not None:
+                dtau += tv.dtau
+            if tv.dac is not None:
+                dac += tv.dac
+        return Evaluation(total, values, dx, dtau, dac)

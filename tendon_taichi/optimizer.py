@@ -1,0 +1,313 @@
+"""Regularized soft IK with an L0 homotopy (DESIGN.md section 3).
+
+The design variables are the scaled contractions ``r = ac / a0`` within
+``[-pmax, cmax]``. Each evaluation solves the equilibrium ``x*(ac)`` (warm
+started from the previous one), evaluates the objective, and gets the whole
+gradient from ONE adjoint solve with the exact Hessian::
+
+    H lambda = dO/dx                       (dO/dx includes the path through tau)
+    dO/dac = dO/dac|explicit + dO/dtau dtau/dac - lambda^T d2E/(dx dac)
+
+Stages: stage 0 is the paper's plain soft IK (pose and the small contraction
+regularizer); stage s >= 1 adds sparsity with ``k = k0 factor^(s-1)`` and
+continuity, and re-optimizes from the previous stage's ``r``. The schedule
+stops when the active set has not changed over two stages or ``k < k_min``.
+Every stage starts from the equilibrium solved from rest, so a stage depends
+only on its starting ``r``: a resumed run repeats an uninterrupted one exactly.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.optimize as so
+
+from .errors import ConvergenceError
+from .model import Model
+from .objectives import (ContinuityTerm, ContractionTerm, Evaluation, Objective, PoseTerm,
+                         SparsityTerm, State)
+from .problem import Problem
+from .scene import OptimizeSettings
+from .solvers import CGSolver, Equilibrium, NewtonSolver
+
+#: relative tolerance of the adjoint solve (the gradient's accuracy)
+ADJOINT_TOL = 1e-10
+#: relative force tolerance of the equilibria inside a stage (positions to ~1e-8 L);
+#: a stage's start and final states use the solver's own (1e-10)
+EVAL_TOL = 1e-8
+
+
+@dataclass
+class Figures:
+    """What a state achieves: pose error (m, root of summed squares), relative to L,
+    worst single target (m), active fibers (tau > threshold), their rest length (m),
+    the largest tension (N), and the objective terms."""
+
+    pose_error: float
+    pose_error_rel: float
+    pose_error_max: float
+    active_fibers: int
+    active_length: float
+    tau_max: float
+    objective: dict[str, float]
+
+    def as_dict(self) -> dict:
+        return {"pose_error": self.pose_error, "pose_error_rel": self.pose_error_rel,
+                "pose_error_max": self.pose_error_max, "active_fibers": self.active_fibers,
+                "active_length": self.active_length, "tau_max": self.tau_max,
+                "objective": dict(self.objective)}
+
+
+@dataclass
+class StageResult:
+    """One completed stage: its ``k`` (None for stage 0), L-BFGS-B iterations and
+    evaluations, wall time, figures, and the final state (``r``, ``ac`` m, ``tau`` N,
+    ``x`` (n, 2) m; None for a stage read back from a recording)."""
+
+    stage: int
+    k: float | None
+    iterations: int
+    evaluations: int
+    time_s: float
+    figures: Figures
+    r: np.ndarray
+    ac: np.ndarray
+    tau: np.ndarray
+    x: np.ndarray | None
+    message: str = ""
+
+    def summary(self) -> dict:
+        return {"stage": self.stage, "k": self.k, "iterations": self.iterations,
+                "evaluations": self.evaluations, **self.figures.as_dict(), "time_s": self.time_s}
+
+
+@dataclass
+class Iterate:
+    """Passed to progress callbacks once per L-BFGS-B iteration."""
+
+    stage: int
+    k: float | None
+    iteration: int
+    figures: Figures
+    x: np.ndarray
+    tau: np.ndarray
+
+
+class SoftIK:
+    """The objective over ``r = ac / a0`` and its adjoint gradient, on one model.
+
+    ``solver``: the linear backend of both the equilibrium and the adjoint
+    (``cg``, ``direct`` or ``auto``); ``model`` may be shared (compiled kernels
+    are shared anyway).
+    """
+
+    def __init__(self, problem: Problem, settings: OptimizeSettings, solver: str = "auto",
+                 model: Model | None = None):
+        self.problem, self.settings = problem, settings
+        self.model = model or Model.from_problem(problem)
+        self.newton = NewtonSolver(self.model, solver, reuse=True)
+        self.linear = self.newton.linear
+        self.a0 = problem.fibers.a0
+        s = settings
+        self.objective = Objective([
+            PoseTerm(problem),
+            SparsityTerm(problem, s.sparsity, s.sparsity_measure, s.homotopy.k0),
+            ContinuityTerm(problem, s.continuity, s.tension_scale, s.continuity_measure),
+            ContractionTerm(problem, s.contraction_reg),
+        ])
+        self.k: float | None = None
+        self.configure(None)
+        self.evaluations = 0
+        self._last: tuple[np.ndarray, float, np.ndarray, Evaluation, np.ndarray] | None = None
+        self._lambda_warm = False
+        self._pred = None
+        self._x_last = problem.mesh.nodes
+        self.eval_tol = EVAL_TOL
+
+    # ------------------------------------------------------------ stages
+    def configure(self, k: float | None) -> None:
+        """Stage 0 (``k`` None): pose + contraction; else sparsity at ``k`` and continuity too."""
+        self.k = k
+        active = {"pose", "contraction"}
+        if k is not None:
+            self.objective.term("sparsity").k = k
+            active |= {"sparsity", "continuity"}
+        self.objective.active = active
+        self._last = None
+
+    def restart(self, r: np.ndarray) -> Equilibrium:
+        """The canonical start of a stage: the equilibrium at ``r`` solved from rest,
+        and a cold adjoint."""
+        self._lambda_warm = False
+        self._last = None
+        self._pred = None
+        if hasattr(self.linear, "factor"):
+            self.linear.factor = None
+        return self._solve(r, cold=True)
+
+    # ------------------------------------------------------------ evaluation
+    def _predict(self, ac: np.ndarray) -> np.ndarray | None:
+        """First-order prediction of x*(ac) from the last equilibrium, whose Hessian the
+        adjoint just factorized: x* - H^-1 (d2E/dx dac) (ac - ac_last)."""
+        if self._pred is None:
+            return None
+        x_last, ac_last = self._pred
+        self._pred = None
+        dx = -self.linear.solve_last(self.model.mixed_product(ac - ac_last))
+        return x_last + dx
+
+    def _solve(self, r: np.ndarray, cold: bool = False) -> Equilibrium:
+        ac = np.asarray(r, dtype=float) * self.a0
+        x0 = self.problem.mesh.nodes if cold else None
+        if not cold:
+            pred = self._predict(ac)
+            if pred is not None:
+                self.model.set_positions(pred)
+                if self.model.energy() == float("inf"):  # the prediction inverts a triangle
+                    self.model.set_positions(self._x_last)
+        tol = None if cold else self.eval_tol
+        try:
+            return self.newton.solve(ac=ac, x0=x0, tol=tol)
+        except ConvergenceError:
+            if cold:
+                raise
+            return self.newton.solve(ac=ac, x0=self.problem.mesh.nodes, tol=tol)
+
+    def evaluate(self, r: np.ndarray) -> tuple[float, np.ndarray]:
+        """Objective and its gradient w.r.t. r at the equilibrium for r."""
+        r = np.array(r, dtype=float)
+        if self._last is not None and np.array_equal(r, self._last[0]):
+            return self._last[1], self._last[2]
+        eq = self._solve(r)
+        m = self.model
+        ac = r * self.a0
+        cab = m.cable_state()
+        ev = self.objective.evaluate(State(eq.x, ac, cab["tau"]))
+        # the whole x-derivative, through the tensions too, and one adjoint solve
+        dOdx = ev.dx + m.length_jacobian_product(ev.dtau * cab["kc"])
+        dOdx[self.problem.fixed] = 0.0
+        lam = self._adjoint(dOdx)
+        dOdac = ev.dac + ev.dtau * cab["tau_ac"] - m.mixed_transpose_product(lam)
+        self._x_last = eq.x
+        if getattr(self.linear, "factor", None) is not None:
+            self._pred = (eq.x, ac)
+        grad = dOdac * self.a0
+        self.evaluations += 1
+        self._last = (r, ev.total, grad, ev, eq.x)
+        return ev.total, grad
+
+    def _adjoint(self, rhs: np.ndarray) -> np.ndarray:
+        if isinstance(self.linear, CGSolver):
+            lam = self.linear.solve(rhs, tol=ADJOINT_TOL, warm=self._lambda_warm)
+            self._lambda_warm = True
+            return lam
+        return self.linear.solve(rhs, tol=ADJOINT_TOL)
+
+    def figures(self, r: np.ndarray) -> Figures:
+        """Figures at r (evaluated if it is not the last point)."""
+        self.evaluate(r)
+        _, _, _, ev, x = self._last
+        p = self.problem
+        tau = self.model.tensions()
+        err = np.linalg.norm(p.target_positions(x) - p.target_goal, axis=1)
+        active = tau > self.settings.active_threshold * self.settings.tension_scale
+        pe = float(np.sqrt((err ** 2).sum()))
+        return Figures(pe, pe / p.size, float(err.max()), int(active.sum()),
+                       float(self.a0[active].sum()), float(tau.max()), dict(ev.terms))
+
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and tensions of the last evaluated point."""
+        return self._last[4], self.model.tensions()
+
+
+def stage_k(settings: OptimizeSettings, stage: int) -> float | None:
+    """k of a stage: None for stage 0, then k0 * factor^(stage - 1)."""
+    if stage == 0:
+        return None
+    h = settings.homotopy
+    return h.k0 * h.factor ** (stage - 1)
+
+
+def active_set(tau: np.ndarray, settings: OptimizeSettings) -> np.ndarray:
+    return tau > settings.active_threshold * settings.tension_scale
+
+
+def schedule_done(stages: list[StageResult], settings: OptimizeSettings) -> bool:
+    """Whether the homotopy is over after these stages: the next k is below k_min,
+    or the active set has not changed over the last two stages (homotopy stages only)."""
+    nxt = stage_k(settings, len(stages))
+    if nxt is not None and nxt < settings.homotopy.k_min:
+        return True
+    if len(stages) >= 4:
+        sets = [active_set(s.tau, settings) for s in stages[-3:]]
+        return bool(np.array_equal(sets[0], sets[1]) and np.array_equal(sets[1], sets[2]))
+    return False
+
+
+@dataclass
+class RunCallbacks:
+    """Hooks for progress and recording: ``on_iteration(Iterate)`` every L-BFGS-B
+    iteration, ``on_stage_start(stage, k)``, ``on_stage(StageResult)`` when a stage completes."""
+
+    on_iteration: list = field(default_factory=list)
+    on_stage_start: list = field(default_factory=list)
+    on_stage: list = field(default_factory=list)
+
+
+def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbacks) -> StageResult:
+    """Optimize one stage from ``r_start`` with L-BFGS-B (bounds [-pmax, cmax])."""
+    s = ik.settings
+    k = stage_k(s, stage)
+    t0 = time.perf_counter()
+    ik.configure(k)
+    ik.restart(r_start)
+    for cb in callbacks.on_stage_start:
+        cb(stage, k)
+    ev0 = ik.evaluations
+    fs = ik.problem.scene.fibers
+    bounds = so.Bounds(-fs.max_payout, fs.max_contraction)
+    count = [0]
+
+    def callback(intermediate_result):
+        count[0] += 1
+        if callbacks.on_iteration:
+            r = intermediate_result.x
+            fig = ik.figures(r)
+            x, tau = ik.state()
+            for cb in callbacks.on_iteration:
+                cb(Iterate(stage, k, count[0], fig, x, tau))
+
+    res = so.minimize(ik.evaluate, np.asarray(r_start, dtype=float), jac=True, method="L-BFGS-B",
+                      bounds=bounds, callback=callback,
+                      options={"maxiter": s.stage_iterations, "ftol": 1e-15, "gtol": 1e-12,
+                               "maxcor": 10, "maxls": 40})
+    r = np.clip(res.x, -fs.max_payout, fs.max_contraction)
+    # the stage's final state, solved from rest (what replay recomputes)
+    ik.restart(r)
+    fig = ik.figures(r)
+    x, tau = ik.state()
+    out = StageResult(stage, k, int(res.nit), ik.evaluations - ev0, time.perf_counter() - t0, fig,
+                      r, r * ik.a0, tau, x, str(res.message))
+    for cb in callbacks.on_stage:
+        cb(out)
+    return out
+
+
+def run_schedule(ik: SoftIK, callbacks: RunCallbacks | None = None,
+                 completed: list[StageResult] | None = None,
+                 r0: np.ndarray | None = None) -> list[StageResult]:
+    """Run (or continue after ``completed``) the stage schedule; return all stages."""
+    callbacks = callbacks or RunCallbacks()
+    stages = list(completed or [])
+    s = ik.settings
+    if stages:
+        r = stages[-1].r
+    else:
+        r = np.full(ik.problem.fibers.n_fibers, s.initial_contraction) if r0 is None else np.asarray(r0)
+    while not (stages and schedule_done(stages, s)):
+        st = run_stage(ik, len(stages), r, callbacks)
+        stages.append(st)
+        r = st.r
+    return stages

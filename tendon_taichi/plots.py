@@ -1,0 +1,59 @@
+"""Pictures (matplotlib, headless): the tension pattern over the deformed body."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .problem import Problem
+
+
+def _axes_tensions(ax, problem: Problem, x: np.ndarray, tau: np.ndarray, threshold: float,
+                   scale: float, title: str):
+    from matplotlib.collections import LineCollection
+
+    T = problem.mesh.triangles
+    ax.triplot(problem.mesh.nodes[:, 0], problem.mesh.nodes[:, 1], T, color="0.88", lw=0.4)
+    ax.triplot(x[:, 0], x[:, 1], T, color="0.72", lw=0.4)
+    c = problem.fibers.embedding.positions(T, x)
+    seg = c[problem.fibers.edges]
+    active = tau > threshold
+    ax.add_collection(LineCollection(seg[~active], colors="0.8", linewidths=0.3))
+    order = np.argsort(tau[active])
+    lc = LineCollection(seg[active][order], cmap="inferno_r", linewidths=2.2)
+    lc.set_array(tau[active][order])
+    lc.set_clim(0.0, max(2.0 * scale, float(tau.max()) if len(tau) else 1.0))
+    ax.add_collection(lc)
+    now = problem.target_positions(x)
+    goal = problem.target_goal
+    ax.scatter(goal[:, 0], goal[:, 1], s=40, marker="x", color="tab:green", zorder=5, label="goal")
+    ax.scatter(now[:, 0], now[:, 1], s=18, color="tab:blue", zorder=5, label="target")
+    ax.set_aspect("equal")
+    ax.set_title(title, fontsize=9)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    return lc
+
+
+def plot_stages(path: str | Path, problem: Problem, panels: list[tuple[str, np.ndarray, np.ndarray]],
+                threshold: float, scale: float) -> Path:
+    """A PNG with one panel per (title, x, tau): fibers coloured by tension (N) over
+    the deformed mesh (grey: rest), targets (blue) and goals (green)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .export import atomic_path
+
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.0), squeeze=False)
+    lc = None
+    for ax, (title, x, tau) in zip(axes[0], panels):
+        lc = _axes_tensions(ax, problem, x, tau, threshold, scale, title)
+    axes[0][0].legend(loc="lower left", fontsize=7)
+    if lc is not None:
+        fig.colorbar(lc, ax=list(axes[0]), shrink=0.8, label="fiber tension (N)")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=130, format="png")
+    plt.close(fig)
+    return Path(path)
