@@ -307,7 +307,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("replay", help="re-solve a recording's stages and check they reproduce")
     s.add_argument("recording", metavar="RUN.rrd")
     s.add_argument("--stage", type=int, default=None, metavar="N", help="only this stage")
-    s.add_argument("--solver", choices=("auto", "cg", "direct"), default="auto")
+    s.add_argument("--solver", choices=("recorded", "auto", "cg", "direct"), default="recorded",
+                   help="linear solver (default: the one the run used)")
     _add_json(s)
     s.set_defaults(func=cmd_replay)
     return p
@@ -328,6 +329,10 @@ def main(argv: list[str] | None = None) -> int:
         runtime.configure(arch=args.arch, threads=args.threads)
         return int(args.func(args) or 0)
     except TendonError as exc:
+        from .runs import Interrupted
+        if isinstance(exc, Interrupted):
+            print(f"{PROG}: {exc}", file=sys.stderr)
+            return 130
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

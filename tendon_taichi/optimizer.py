@@ -34,9 +34,17 @@ from .solvers import CGSolver, Equilibrium, NewtonSolver
 
 #: relative tolerance of the adjoint solve (the gradient's accuracy)
 ADJOINT_TOL = 1e-10
-#: relative force tolerance of the equilibria inside a stage (positions to ~1e-8 L);
-#: a stage's start and final states use the solver's own (1e-10)
+#: relative force tolerance of the equilibria inside a stage (positions to ~1e-8 L)
 EVAL_TOL = 1e-8
+#: ... and of a stage's start and final states, solved from rest by exact Newton
+#: (what replay recomputes: tight enough to reproduce a 0.1 %-of-L pose error to 1e-8)
+STATE_TOL = 1e-12
+
+
+def state_solver(model: Model, linear) -> NewtonSolver:
+    """The solver of stage states: exact Newton from rest to STATE_TOL; the run and
+    replay use it alike, so a recorded stage is recomputed exactly."""
+    return NewtonSolver(model, linear, tol=STATE_TOL, reuse=False)
 
 
 @dataclass
@@ -109,6 +117,7 @@ class SoftIK:
         self.model = model or Model.from_problem(problem)
         self.newton = NewtonSolver(self.model, solver, reuse=True)
         self.linear = self.newton.linear
+        self.state_newton = state_solver(self.model, self.linear)
         self.a0 = problem.fibers.a0
         s = settings
         self.objective = Objective([
@@ -145,7 +154,7 @@ class SoftIK:
         self._pred = None
         if hasattr(self.linear, "factor"):
             self.linear.factor = None
-        return self._solve(r, cold=True)
+        return self.state_newton.solve(ac=np.asarray(r, dtype=float) * self.a0, x0=self.problem.mesh.nodes)
 
     # ------------------------------------------------------------ evaluation
     def _predict(self, ac: np.ndarray) -> np.ndarray | None:
@@ -158,22 +167,18 @@ class SoftIK:
         dx = -self.linear.solve_last(self.model.mixed_product(ac - ac_last))
         return x_last + dx
 
-    def _solve(self, r: np.ndarray, cold: bool = False) -> Equilibrium:
+    def _solve(self, r: np.ndarray) -> Equilibrium:
+        """The equilibrium for r, warm started from the last one (plus a prediction)."""
         ac = np.asarray(r, dtype=float) * self.a0
-        x0 = self.problem.mesh.nodes if cold else None
-        if not cold:
-            pred = self._predict(ac)
-            if pred is not None:
-                self.model.set_positions(pred)
-                if self.model.energy() == float("inf"):  # the prediction inverts a triangle
-                    self.model.set_positions(self._x_last)
-        tol = None if cold else self.eval_tol
+        pred = self._predict(ac)
+        if pred is not None:
+            self.model.set_positions(pred)
+            if self.model.energy() == float("inf"):  # the prediction inverts a triangle
+                self.model.set_positions(self._x_last)
         try:
-            return self.newton.solve(ac=ac, x0=x0, tol=tol)
+            return self.newton.solve(ac=ac, tol=self.eval_tol)
         except ConvergenceError:
-            if cold:
-                raise
-            return self.newton.solve(ac=ac, x0=self.problem.mesh.nodes, tol=tol)
+            return self.newton.solve(ac=ac, x0=self.problem.mesh.nodes, tol=self.eval_tol)
 
     def evaluate(self, r: np.ndarray) -> tuple[float, np.ndarray]:
         """Objective and its gradient w.r.t. r at the equilibrium for r."""

@@ -15,11 +15,11 @@ from . import __version__
 from .errors import InputError, TendonError
 from .export import write_export
 from .model import Model
-from .optimizer import Iterate, RunCallbacks, SoftIK, StageResult, active_set, run_schedule
+from .optimizer import (Iterate, RunCallbacks, SoftIK, StageResult, active_set, run_schedule,
+                        state_solver)
 from .problem import Problem, build_problem
 from .recording import Recorder, RecordingError, completed_chunks, read_recording
 from .scene import Scene
-from .solvers import NewtonSolver
 
 #: a final pose error above this share of L draws a warning (the goals were not reached)
 UNREACHED = 0.05
@@ -248,9 +248,10 @@ def _stages_so_far(record: Path, tmp) -> list[dict]:
 
 
 # ---------------------------------------------------------------- replay
-def replay(path: str | Path, stage: int | None = None, solver: str = "auto", tol: float = 1e-8) -> dict:
+def replay(path: str | Path, stage: int | None = None, solver: str = "recorded", tol: float = 1e-8) -> dict:
     """Rebuild the problem from a recording, re-solve each recorded stage's
-    equilibrium from rest and compare pose error and active count with the record."""
+    equilibrium from rest (with the run's solver unless ``solver`` names another)
+    and compare pose error and active count with the record."""
     t0 = time.perf_counter()
     run = read_recording(path)
     if not run.stages:
@@ -260,7 +261,7 @@ def replay(path: str | Path, stage: int | None = None, solver: str = "auto", tol
     problem = run.problem()
     settings = run.settings
     model = Model.from_problem(problem)
-    newton = NewtonSolver(model, solver)
+    newton = state_solver(model, run.meta.get("solver", "auto") if solver == "recorded" else solver)
     rows = []
     for k, rs in enumerate(run.stages):
         if stage is not None and k != stage:

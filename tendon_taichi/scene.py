@@ -135,7 +135,7 @@ class OptimizeSettings:
     active_threshold: float = 0.01
     sparsity_measure: str = "length"
     continuity_measure: str = "length"
-    stage_iterations: int = 200
+    stage_iterations: int = 150
 
 
 @dataclass(frozen=True)

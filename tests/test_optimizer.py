@@ -1,0 +1,106 @@
+"""The regularized soft IK: adjoint gradients, and the optimizer on a planted layout."""
+
+import re
+
+import numpy as np
+import pytest
+
+from tendon_taichi import CableSet, Model, NewtonSolver, build_problem, load_scene, parse_scene
+from tendon_taichi.objectives import smoothstep
+from tendon_taichi.optimizer import SoftIK, run_schedule, schedule_done, stage_k
+from tendon_taichi.runs import optimize
+
+TERMS = ["pose", "sparsity", "continuity", "contraction"]
+
+
+@pytest.fixture(scope="module")
+def t_shape_1():
+    return build_problem(load_scene("t_shape"), 1)
+
+
+@pytest.mark.parametrize("solver", ["cg", "direct"])
+@pytest.mark.parametrize("terms", [[t] for t in TERMS] + [TERMS], ids=lambda t: "+".join(t))
+def test_adjoint_gradient_matches_finite_differences(t_shape_1, solver, terms):
+    p = t_shape_1
+    ik = SoftIK(p, p.scene.optimize, solver)
+    ik.newton.tol = ik.eval_tol = 1e-13
+    ik.configure(0.4)  # a k inside the range of the tensions: the smoothstep is curved there
+    ik.objective.active = set(terms)
+    rng = np.random.default_rng(7)
+    r = rng.uniform(-0.05, 0.12, p.fibers.n_fibers)
+    ik.restart(r)
+    f, g = ik.evaluate(r)
+    tau = ik.model.tensions()
+    assert (tau > 0.4).any() and ((tau > 0) & (tau < 0.4)).any()  # both sides of k
+    for trial in range(2):
+        d = rng.standard_normal(len(r))
+        h = 1e-6
+        vals = []
+        for sgn in (1, -1):
+            ik._last = None
+            vals.append(ik.evaluate(r + sgn * h * d)[0])
+        fd = (vals[0] - vals[1]) / (2 * h)
+        assert abs(fd - np.dot(g, d)) <= 1e-5 * abs(fd), (terms, fd, np.dot(g, d))
+        assert abs(fd) > 1e-9
+
+
+def test_smoothstep():
+    t = np.array([-1.0, 0.0, 0.25, 0.5, 1.0, 2.0])
+    s, ds = smoothstep(t, 1.0)
+    assert np.allclose(s, [0, 0, 3 / 16 - 2 / 64, 0.5, 1, 1])
+    h = 1e-7
+    fd = (smoothstep(t + h, 1.0)[0] - smoothstep(t - h, 1.0)[0]) / (2 * h)
+    assert np.allclose(ds[2:4], fd[2:4], rtol=1e-6) and ds[0] == ds[-1] == 0
+
+
+def test_homotopy_schedule():
+    s = load_scene("t_shape").optimize
+    assert stage_k(s, 0) is None and stage_k(s, 1) == 1.0 and stage_k(s, 3) == 0.25
+    ks = [stage_k(s, i) for i in range(1, 9)]
+    assert ks[-2] >= 0.01 > ks[-1]  # 1 .. 1/128: the last stage run is k = 1/64
+
+    class St:
+        def __init__(self, tau):
+            self.tau = np.asarray(tau)
+    assert schedule_done([St([0, 1])] * 8, s)  # next k below k_min
+    assert schedule_done([St([0, 0]), St([1, 1]), St([1, 1]), St([1, 1])], s)  # unchanged twice
+    assert not schedule_done([St([0, 0]), St([0, 1]), St([1, 1]), St([1, 1])], s)
+
+
+# ------------------------------------------------------------------ planted layout
+PLANTED = [[(-0.045, 0.0625), (-0.015, 0.0625), (-0.0075, 0.055), (-0.0075, 0.01)],
+           [(0.045, 0.0775), (0.005, 0.0775)]]
+
+
+def planted_scene(level: int = 2):
+    """t_shape with goals made by two sliding-cable tendons at 8% contraction."""
+    base = load_scene("t_shape")
+    p = build_problem(base, level)
+    cab = CableSet.polylines(p.mesh, [np.array(q) for q in PLANTED], base.fibers.stiffness)
+    eq = NewtonSolver(Model.from_problem(p, cables=cab), "direct").solve(ac=0.08 * cab.a0)
+    goals = iter(p.target_positions(eq.x))
+    text = re.sub(r"goal = \[[^\]]*\]", lambda _: "goal = [{:.10f}, {:.10f}]".format(*next(goals)),
+                  base.source)
+    return parse_scene(text.replace('name = "t_shape"', 'name = "t_planted"'), origin="planted")
+
+
+@pytest.fixture(scope="module")
+def planted_runs(tmp_path_factory):
+    scene = planted_scene()
+    out = tmp_path_factory.mktemp("planted")
+    return {lv: optimize(scene, lv, record=out / f"r{lv}.rrd") for lv in (1, 2, 3)}
+
+
+@pytest.mark.parametrize("level", [1, 2])
+def test_planted_layout_is_reached_sparsely(planted_runs, level):
+    run = planted_runs[level]
+    s0, last = run.stages[0].figures, run.stages[-1].figures
+    assert run.stages[0].k is None and len(run.stages) >= 5
+    assert last.pose_error_rel <= 0.01
+    assert s0.active_length >= 3 * last.active_length
+    assert run.summary["final"]["active_length"] == last.active_length
+
+
+def test_active_length_is_resolution_independent(planted_runs):
+    lengths = [planted_runs[lv].stages[-1].figures.active_length for lv in (1, 2, 3)]
+    assert max(lengths) <= 1.3 * min(lengths), lengths

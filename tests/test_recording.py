@@ -1,0 +1,187 @@
+"""Recordings: the JSON summary, replay, rerun's own verifier, killed runs and resume,
+and bad recordings - all through the command line."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tendon_taichi import build_problem, load_scene
+from tendon_taichi.recording import Recorder, read_recording
+
+# five short stages (k = -, 1, 0.5, 0.25, 0.125) on t_shape level 1
+SHORT = ["--stage-iterations", "15", "--k-min", "0.1"]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """An uninterrupted short run: its recording and JSON summary."""
+    from conftest import run_cli
+
+    d = tmp_path_factory.mktemp("ref")
+    r = run_cli("optimize", "t_shape", *SHORT, "--record", d / "ref.rrd", "--json", cwd=d)
+    assert r.returncode == 0, r.stderr
+    return d / "ref.rrd", json.loads(r.stdout)
+
+
+def test_optimize_summary_follows_the_contract(reference):
+    path, s = reference
+    for key in ("scene", "resolution", "nodes", "triangles", "fibers", "body_size", "stages", "final",
+                "recording", "export", "time_s"):
+        assert key in s
+    assert [st["stage"] for st in s["stages"]] == [0, 1, 2, 3, 4]
+    assert s["stages"][0]["k"] is None and s["stages"][1]["k"] == 1.0
+    for st in s["stages"]:
+        for key in ("stage", "k", "iterations", "pose_error", "pose_error_rel", "pose_error_max",
+                    "active_fibers", "active_length", "tau_max", "objective", "time_s"):
+            assert key in st
+        assert set(st["objective"]) == {"pose", "sparsity", "continuity", "contraction"}
+        assert st["pose_error_rel"] == pytest.approx(st["pose_error"] / s["body_size"])
+    assert s["stages"][0]["objective"]["sparsity"] == 0.0 < s["stages"][1]["objective"]["sparsity"]
+    assert s["final"] == s["stages"][-1]
+    d = np.load(s["export"])
+    assert np.allclose(d["ac"], read_recording(path).stages[-1].ac, rtol=0, atol=0)
+
+
+def test_replay_reproduces_every_stage(reference, cli):
+    path, s = reference
+    r = cli("replay", path, "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["reproduces"] and len(out["stages"]) == 5
+    for rec, row in zip(s["stages"], out["stages"]):
+        assert row["pose_error_rel_diff"] <= 1e-8
+        assert row["active_fibers"] == rec["active_fibers"]
+        assert row["recorded_pose_error"] == rec["pose_error"]
+    one = json.loads(cli("replay", path, "--stage", 2, "--json").stdout)
+    assert [row["stage"] for row in one["stages"]] == [2]
+
+
+def test_rerun_verifies_the_file(reference):
+    path, _ = reference
+    exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
+    assert exe, "the rerun CLI ships with rerun-sdk"
+    r = subprocess.run([exe, "rrd", "verify", str(path)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr + r.stdout
+
+
+def test_recording_holds_the_layout(reference):
+    path, s = reference
+    run = read_recording(path)
+    p = run.problem()
+    ref = build_problem(load_scene("t_shape"), 1)
+    assert np.array_equal(p.mesh.nodes, ref.mesh.nodes) and np.array_equal(p.fibers.edges, ref.fibers.edges)
+    assert len(run.stages) == 5 and run.meta["resolution"] == 1
+    assert run.stages[1].ac.dtype == np.float64 and len(run.stages[1].tau) == ref.fibers.n_fibers
+    from rerun.chunk import RrdReader
+    entities = {c.entity_path for c in RrdReader(path).stream()}
+    for e in ("/meta/run", "/meta/scene", "/problem/nodes", "/world/rest_mesh", "/world/mesh", "/world/fibers",
+              "/world/targets", "/world/goals", "/metrics/objective/pose", "/metrics/figures/pose_error_rel",
+              "/metrics/figures/active_fibers", "/metrics/figures/k", "/stages/ac", "/stages/tau"):
+        assert e in entities, e
+
+
+def _start(args, cwd):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "tendon_taichi", *map(str, args)], cwd=cwd, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
+def test_killed_run_keeps_its_stages_and_resumes_exactly(reference, tmp_path, cli, sig):
+    _, ref = reference
+    rec = tmp_path / "killed.rrd"
+    proc = _start(["optimize", "t_shape", *SHORT, "--record", rec], tmp_path)
+    seen = []
+    for line in proc.stderr:
+        seen.append(line)
+        if line.startswith("stage 1 done"):
+            proc.send_signal(sig)
+            break
+    rest = proc.stderr.read()
+    rc = proc.wait(timeout=120)
+    if sig == signal.SIGINT:
+        assert rc == 130 and "interrupted after" in rest and "Traceback" not in rest, rest
+    else:
+        assert rc == -signal.SIGKILL
+    r = cli("replay", rec, "--json")
+    assert r.returncode == 0, r.stderr
+    kept = json.loads(r.stdout)
+    assert 2 <= len(kept["stages"]) < 5 and kept["reproduces"]
+    r = cli("optimize", "--resume", rec, "--json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    resumed = json.loads(r.stdout)
+    assert [st["stage"] for st in resumed["stages"]] == [0, 1, 2, 3, 4]
+    for a, b in zip(resumed["stages"], ref["stages"]):
+        for key in ("pose_error", "active_fibers", "active_length", "tau_max"):
+            assert a[key] == pytest.approx(b[key], rel=1e-6, abs=0), key
+        for term in a["objective"]:
+            assert a["objective"][term] == pytest.approx(b["objective"][term], rel=1e-6, abs=1e-300)
+    assert json.loads(cli("replay", rec, "--json").stdout)["reproduces"]
+
+
+def _one_line_error(r, text):
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode != 0 and len(lines) == 1 and text in lines[0], r.stderr
+    assert lines[0].startswith("tendon-taichi: error:") and "Traceback" not in r.stderr
+
+
+def test_bad_recordings(tmp_path, cli, reference):
+    path, _ = reference
+    _one_line_error(cli("replay", tmp_path / "missing.rrd"), "does not exist")
+    (tmp_path / "text.rrd").write_text("hello")
+    _one_line_error(cli("replay", tmp_path / "text.rrd"), "not a rerun recording")
+    cut = tmp_path / "cut.rrd"
+    cut.write_bytes(path.read_bytes()[:300])
+    _one_line_error(cli("replay", cut), "recording")
+    import rerun as rr
+    other = rr.RecordingStream("someone_else")
+    other.save(str(tmp_path / "foreign.rrd"))
+    other.log("/points", rr.Points2D([[0, 0]]))
+    other.flush()
+    other.disconnect()
+    _one_line_error(cli("replay", tmp_path / "foreign.rrd"), "not a tendon-taichi recording")
+    # a run that recorded its header but no completed stage
+    p = build_problem(load_scene("finger"), 1)
+    empty = Recorder(tmp_path / "empty.rrd", p, p.scene.optimize, {"run_id": "e", "resolution": 1})
+    empty.write_header()
+    empty.close()
+    _one_line_error(cli("replay", tmp_path / "empty.rrd"), "no completed stage")
+    _one_line_error(cli("optimize", "--resume", tmp_path / "empty.rrd"), "no completed stage to resume")
+
+
+def test_torn_last_frame_is_tolerated(reference, tmp_path, cli):
+    """A run killed while writing leaves a torn last frame: the complete part is read."""
+    path, _ = reference
+    torn = tmp_path / "torn.rrd"
+    data = path.read_bytes()
+    torn.write_bytes(data[: len(data) * 3 // 4])
+    r = cli("replay", torn, "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["truncated"] and 1 <= len(out["stages"]) <= 5 and out["reproduces"]
+
+
+def test_unreachable_goal_gives_a_best_effort_and_a_warning(tmp_path, cli):
+    text = load_scene("finger").source.replace("goal = [0.0939, 0.0345]", "goal = [0.30, 0.30]")
+    (tmp_path / "far.toml").write_text(text)
+    r = cli("optimize", tmp_path / "far.toml", "--stage-iterations", "10", "--k-min", "0.4",
+            "--record", tmp_path / "far.rrd", "--json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert "warning: the goals are out of reach" in r.stderr
+    assert s["final"]["pose_error_rel"] > 0.05 and s["warnings"]
+    assert (tmp_path / "far.npz").exists()
+
+
+def test_optimize_bad_input(cli, tmp_path):
+    _one_line_error(cli("optimize", "t_shape", "--sparsity", "-1", cwd=tmp_path), "sparsity must be >= 0")
+    _one_line_error(cli("optimize", cwd=tmp_path), "a SCENE is required")
+    _one_line_error(cli("optimize", "t_shape", "--record", "x.txt", cwd=tmp_path), "must be an .rrd")
+    assert not (tmp_path / "recordings").exists() or not any((tmp_path / "recordings").iterdir())
