@@ -155,6 +155,9 @@ OPTIMIZE_FLAGS = {
     "--sparsity-measure": ("sparsity_measure", str, "length (default) or count"),
     "--continuity-measure": ("continuity_measure", str, "length (default) or count"),
     "--stage-iterations": ("stage_iterations", int, "L-BFGS-B iteration cap per stage"),
+    "--settle-tol": ("settle_tol", float, "a stage ends when the objective fell by less than this x its "
+                                          "start value over the settle window"),
+    "--settle-window": ("settle_window", int, "iterations over which a stage must have settled"),
     "--k0": ("k0", float, "first homotopy k, N"),
     "--k-factor": ("factor", float, "k <- k * factor per stage"),
     "--k-min": ("k_min", float, "stop once k falls below this, N"),
@@ -234,7 +237,10 @@ def cmd_optimize(args) -> int:
 def cmd_replay(args) -> int:
     from .runs import replay
 
-    out = replay(args.recording, stage=args.stage, solver=args.solver)
+    png = None
+    if args.png is not None:
+        png = Path(args.recording).with_suffix(".png") if args.png == "-" else Path(args.png)
+    out = replay(args.recording, stage=args.stage, solver=args.solver, png=png)
     _json_out(args, out)
     if args.json != "-":
         print(f"{out['recording']}: {out['scene']} level {out['resolution']}"
@@ -247,6 +253,8 @@ def cmd_replay(args) -> int:
             print(f"{r['stage']:>5} {k:>8} {1e3 * r['recorded_pose_error']:>17.6f} mm "
                   f"{1e3 * r['pose_error']:>11.6f} mm {r['pose_error_rel_diff']:>10.1e} "
                   f"{r['recorded_active_fibers']:>7}/{r['active_fibers']:<7} {flag}")
+        if "png" in out:
+            print(f"png: {out['png']}")
     if not out["reproduces"]:
         bad = [str(r["stage"]) for r in out["stages"] if not r["reproduces"]]
         print(f"{PROG}: replay: stage(s) {', '.join(bad)} do not reproduce the recorded figures",
@@ -309,6 +317,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--stage", type=int, default=None, metavar="N", help="only this stage")
     s.add_argument("--solver", choices=("recorded", "auto", "cg", "direct"), default="recorded",
                    help="linear solver (default: the one the run used)")
+    s.add_argument("--png", nargs="?", const="-", metavar="FILE",
+                   help="picture of stage 0 and the last replayed stage (default: beside the recording)")
     _add_json(s)
     s.set_defaults(func=cmd_replay)
     return p

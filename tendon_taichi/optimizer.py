@@ -222,9 +222,27 @@ class SoftIK:
         return Figures(pe, pe / p.size, float(err.max()), int(active.sum()),
                        float(self.a0[active].sum()), float(tau.max()), dict(ev.terms))
 
+    def last_value(self) -> float:
+        """The objective at the last evaluated point."""
+        return self._last[1]
+
     def state(self) -> tuple[np.ndarray, np.ndarray]:
         """Positions and tensions of the last evaluated point."""
         return self._last[4], self.model.tensions()
+
+
+def settled(history: list[tuple[float, bytes]], stage: int, settings: OptimizeSettings) -> bool:
+    """Whether a stage has settled: over the last ``settle_window`` iterations the
+    objective fell by at most ``settle_tol`` x its first value, and (homotopy stages)
+    the active set stayed the same. ``history`` holds (objective, active-set bytes)."""
+    w = settings.settle_window
+    if len(history) <= w:
+        return False
+    f_start = history[0][0]
+    f_then, f_now = history[-1 - w][0], history[-1][0]
+    if f_then - f_now > settings.settle_tol * abs(f_start):
+        return False
+    return stage == 0 or all(a == history[-1][1] for _, a in history[-1 - w:])
 
 
 def stage_k(settings: OptimizeSettings, stage: int) -> float | None:
@@ -273,16 +291,17 @@ def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbac
     ev0 = ik.evaluations
     fs = ik.problem.scene.fibers
     bounds = so.Bounds(-fs.max_payout, fs.max_contraction)
-    count = [0]
+    history: list[tuple[float, bytes]] = []
 
     def callback(intermediate_result):
-        count[0] += 1
-        if callbacks.on_iteration:
-            r = intermediate_result.x
-            fig = ik.figures(r)
-            x, tau = ik.state()
-            for cb in callbacks.on_iteration:
-                cb(Iterate(stage, k, count[0], fig, x, tau))
+        r = intermediate_result.x
+        fig = ik.figures(r)
+        x, tau = ik.state()
+        history.append((ik.last_value(), active_set(tau, s).tobytes()))
+        for cb in callbacks.on_iteration:
+            cb(Iterate(stage, k, len(history), fig, x, tau))
+        if settled(history, stage, s):
+            raise StopIteration
 
     res = so.minimize(ik.evaluate, np.asarray(r_start, dtype=float), jac=True, method="L-BFGS-B",
                       bounds=bounds, callback=callback,
@@ -293,8 +312,9 @@ def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbac
     ik.restart(r)
     fig = ik.figures(r)
     x, tau = ik.state()
+    message = "settled" if res.status == 99 or "StopIteration" in str(res.message) else str(res.message)
     out = StageResult(stage, k, int(res.nit), ik.evaluations - ev0, time.perf_counter() - t0, fig,
-                      r, r * ik.a0, tau, x, str(res.message))
+                      r, r * ik.a0, tau, x, message)
     for cb in callbacks.on_stage:
         cb(out)
     return out

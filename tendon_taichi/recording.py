@@ -6,7 +6,8 @@ iteration counted over the whole run):
 * static: ``/meta/run`` (JSON: package version, scene name, resolution,
   effective settings, solver), ``/meta/scene`` (the scene TOML), ``/problem/*``
   (the rest mesh, clamps, fiber graph, embeddings and targets as f64 tensors,
-  so a run can be rebuilt from the file alone), ``/world/rest_mesh``;
+  so a run can be rebuilt from the file alone), ``/world/rest_mesh`` and
+  ``/world/rest_fibers`` (the fiber graph);
 * per logged iteration: ``/world/mesh`` (deformed edges), ``/world/fibers``
   (coloured by tension on a fixed scale, slack fibers faint), ``/world/targets``,
   ``/world/goals``, and scalars ``/metrics/objective/<term>``,
@@ -107,6 +108,9 @@ class Recorder:
         X = p.mesh.nodes
         rec.log("/world/rest_mesh", rr.LineStrips2D(X[self.edges].astype(np.float32),
                                                     colors=[(200, 200, 200, 60)], radii=-0.5),
+                static=True)
+        rec.log("/world/rest_fibers", rr.LineStrips2D(p.fibers.nodes[p.fibers.edges].astype(np.float32),
+                                                      colors=[(150, 150, 150, 30)], radii=-0.5),
                 static=True)
         self.rec.flush()
 
@@ -313,7 +317,7 @@ def completed_chunks(path: str | Path, stages: int):
     keep = []
     for ch in chunks:
         if "stage" not in ch.timeline_names:
-            if ch.entity_path.startswith(("/meta", "/problem", "/world/rest_mesh")):
+            if ch.entity_path.startswith(("/meta", "/problem", "/world/rest_")):
                 keep.append(ch)
             continue
         vals = _stage_values(ch.to_record_batch())

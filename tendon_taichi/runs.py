@@ -14,6 +14,7 @@ import numpy as np
 from . import __version__
 from .errors import InputError, TendonError
 from .export import write_export
+from .plots import plot_stages
 from .model import Model
 from .optimizer import (Iterate, RunCallbacks, SoftIK, StageResult, active_set, run_schedule,
                         state_solver)
@@ -248,10 +249,12 @@ def _stages_so_far(record: Path, tmp) -> list[dict]:
 
 
 # ---------------------------------------------------------------- replay
-def replay(path: str | Path, stage: int | None = None, solver: str = "recorded", tol: float = 1e-8) -> dict:
+def replay(path: str | Path, stage: int | None = None, solver: str = "recorded", tol: float = 1e-8,
+           png: str | Path | None = None) -> dict:
     """Rebuild the problem from a recording, re-solve each recorded stage's
     equilibrium from rest (with the run's solver unless ``solver`` names another)
-    and compare pose error and active count with the record."""
+    and compare pose error and active count with the record; ``png`` also draws
+    stage 0 beside the last replayed stage."""
     t0 = time.perf_counter()
     run = read_recording(path)
     if not run.stages:
@@ -262,11 +265,12 @@ def replay(path: str | Path, stage: int | None = None, solver: str = "recorded",
     settings = run.settings
     model = Model.from_problem(problem)
     newton = state_solver(model, run.meta.get("solver", "auto") if solver == "recorded" else solver)
-    rows = []
+    rows, states = [], {}
     for k, rs in enumerate(run.stages):
         if stage is not None and k != stage:
             continue
         eq = newton.solve(ac=rs.ac, x0=problem.mesh.nodes)
+        states[k] = (eq.x, eq.tau)
         err = np.linalg.norm(problem.target_positions(eq.x) - problem.target_goal, axis=1)
         pe = float(np.sqrt((err ** 2).sum()))
         act = active_set(eq.tau, settings)
@@ -277,6 +281,19 @@ def replay(path: str | Path, stage: int | None = None, solver: str = "recorded",
                      "pose_error": pe, "pose_error_rel_diff": rel,
                      "recorded_active_fibers": rec["active_fibers"], "active_fibers": int(act.sum()),
                      "active_length": float(problem.fibers.a0[act].sum()), "reproduces": bool(ok)})
-    return {"recording": str(path), "scene": run.meta.get("scene"), "resolution": problem.level,
-            **problem.counts(), "truncated": run.truncated, "stages": rows,
-            "reproduces": all(r["reproduces"] for r in rows), "time_s": time.perf_counter() - t0}
+    out = {"recording": str(path), "scene": run.meta.get("scene"), "resolution": problem.level,
+           **problem.counts(), "truncated": run.truncated, "stages": rows,
+           "reproduces": all(r["reproduces"] for r in rows), "time_s": time.perf_counter() - t0}
+    if png is not None:
+        first = 0 if stage is None else stage
+        last = max(states)
+        if 0 not in states:
+            eq = newton.solve(ac=run.stages[0].ac, x0=problem.mesh.nodes)
+            states[0] = (eq.x, eq.tau)
+        panels = [(f"stage {k}{' (unregularized)' if k == 0 else ''}: "
+                   f"{int(active_set(states[k][1], settings).sum())} active", *states[k])
+                  for k in sorted({0, first, last})]
+        plot_stages(png, problem, panels, settings.active_threshold * settings.tension_scale,
+                    settings.tension_scale)
+        out["png"] = str(png)
+    return out

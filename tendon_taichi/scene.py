@@ -122,8 +122,10 @@ class OptimizeSettings:
     ``initial_contraction`` r0 (ratio of rest length); ``active_threshold``
     (x tau_ref); ``sparsity_measure`` and ``continuity_measure`` are
     ``"length"`` (resolution independent, default) or ``"count"`` (the
-    paper's literal sums); ``stage_iterations`` caps L-BFGS-B iterations per
-    stage.
+    paper's literal sums). A stage has settled - and ends - when over the last
+    ``settle_window`` L-BFGS-B iterations the objective fell by less than
+    ``settle_tol`` times its value at the stage's start (and, from stage 1 on,
+    the active set did not change); ``stage_iterations`` caps a stage anyway.
     """
 
     sparsity: float = 1.0e-4
@@ -135,7 +137,9 @@ class OptimizeSettings:
     active_threshold: float = 0.01
     sparsity_measure: str = "length"
     continuity_measure: str = "length"
-    stage_iterations: int = 150
+    stage_iterations: int = 500
+    settle_tol: float = 1.0e-4
+    settle_window: int = 25
 
 
 @dataclass(frozen=True)
@@ -322,6 +326,8 @@ def _read_optimize(r: _Reader, fibers: FiberSettings) -> OptimizeSettings:
         sparsity_measure=r.choice("sparsity_measure", d.sparsity_measure, measures),
         continuity_measure=r.choice("continuity_measure", d.continuity_measure, measures),
         stage_iterations=r.integer("stage_iterations", d.stage_iterations, ge=1),
+        settle_tol=r.number("settle_tol", d.settle_tol, ge=0.0),
+        settle_window=r.integer("settle_window", d.settle_window, ge=1),
     )
     r.finish()
     return opt

@@ -7,7 +7,7 @@ import pytest
 
 from tendon_taichi import CableSet, Model, NewtonSolver, build_problem, load_scene, parse_scene
 from tendon_taichi.objectives import smoothstep
-from tendon_taichi.optimizer import SoftIK, run_schedule, schedule_done, stage_k
+from tendon_taichi.optimizer import SoftIK, schedule_done, settled, stage_k
 from tendon_taichi.runs import optimize
 
 TERMS = ["pose", "sparsity", "continuity", "contraction"]
@@ -65,6 +65,18 @@ def test_homotopy_schedule():
     assert schedule_done([St([0, 1])] * 8, s)  # next k below k_min
     assert schedule_done([St([0, 0]), St([1, 1]), St([1, 1]), St([1, 1])], s)  # unchanged twice
     assert not schedule_done([St([0, 0]), St([0, 1]), St([1, 1]), St([1, 1])], s)
+
+
+def test_a_stage_settles_when_objective_and_active_set_stop_moving():
+    s = load_scene("t_shape").optimize.__class__(settle_tol=1e-3, settle_window=3)
+    a, b = b"\x01\x00", b"\x01\x01"
+    flat = [(1.0, a), (0.5, a), (0.4999, a), (0.4998, a), (0.4998, a)]
+    assert settled(flat, 1, s)
+    assert not settled(flat[:3], 1, s)  # not enough iterations yet
+    falling = [(1.0, a), (0.9, a), (0.8, a), (0.7, a), (0.6, a)]
+    assert not settled(falling, 1, s)
+    switching = [(1.0, a), (0.5, a), (0.5, b), (0.5, a), (0.5, a)]
+    assert not settled(switching, 1, s) and settled(switching, 0, s)  # stage 0 ignores the set
 
 
 # ------------------------------------------------------------------ planted layout

@@ -81,7 +81,8 @@ def test_recording_holds_the_layout(reference):
     assert run.stages[1].ac.dtype == np.float64 and len(run.stages[1].tau) == ref.fibers.n_fibers
     from rerun.chunk import RrdReader
     entities = {c.entity_path for c in RrdReader(path).stream()}
-    for e in ("/meta/run", "/meta/scene", "/problem/nodes", "/world/rest_mesh", "/world/mesh", "/world/fibers",
+    for e in ("/meta/run", "/meta/scene", "/problem/nodes", "/world/rest_mesh", "/world/rest_fibers",
+              "/world/mesh", "/world/fibers",
               "/world/targets", "/world/goals", "/metrics/objective/pose", "/metrics/figures/pose_error_rel",
               "/metrics/figures/active_fibers", "/metrics/figures/k", "/stages/ac", "/stages/tau"):
         assert e in entities, e
