@@ -164,7 +164,7 @@ OPTIMIZE_FLAGS = {
 }
 
 
-def _stage_table(stages: list[dict], L: float) -> list[str]:
+def _stage_table(stages: list[dict]) -> list[str]:
     rows = [f"{'stage':>5} {'k':>8} {'iter':>5} {'pose error':>18} {'active':>7} {'length':>9} "
             f"{'tau max':>8} {'time':>7}"]
     for s in stages:
@@ -177,8 +177,7 @@ def _stage_table(stages: list[dict], L: float) -> list[str]:
 
 
 def cmd_optimize(args) -> int:
-    from .plots import plot_stages
-    from .runs import Interrupted, Progress, _resolve, optimize
+    from .runs import Interrupted, Progress, optimize
     from .scene import load_scene, with_overrides
 
     overrides = {key: getattr(args, flag[2:].replace("-", "_"))
@@ -197,7 +196,7 @@ def cmd_optimize(args) -> int:
     try:
         result = optimize(scene, args.resolution, args.solver, record=args.record, export=args.export,
                           log_every=args.log_every, progress=Progress(enabled=not args.quiet),
-                          resume=args.resume)
+                          resume=args.resume, png=args.png)
     except Interrupted as exc:
         if args.json not in (None, "-"):
             _json_out(args, exc.summary)
@@ -206,20 +205,6 @@ def cmd_optimize(args) -> int:
         print(f"{PROG}: warning: the recording is of scene '{result.problem.scene.name}', not "
               f"'{args.scene}'", file=sys.stderr)
     summary = result.summary
-    if args.png is not None:
-        png = Path(args.png if args.png != "-" else result.recording.with_suffix(".png"))
-        first, last = result.stages[0], result.stages[-1]
-        from .optimizer import SoftIK
-        panels = []
-        for title, st in ((f"stage 0 (unregularized): {first.figures.active_fibers} active", first),
-                          (f"final stage {last.stage}: {last.figures.active_fibers} active", last)):
-            x = st.x
-            if x is None:
-                x = _resolve(SoftIK(result.problem, result.problem.scene.optimize, args.solver), st)
-            panels.append((title, x, st.tau))
-        s = result.problem.scene.optimize
-        plot_stages(png, result.problem, panels, s.active_threshold * s.tension_scale, s.tension_scale)
-        summary["png"] = str(png)
     for w in result.warnings:
         print(f"{PROG}: warning: {w}", file=sys.stderr)
     _json_out(args, summary)
@@ -228,7 +213,7 @@ def cmd_optimize(args) -> int:
     c = result.problem.counts()
     print(f"{summary['scene']} level {summary['resolution']}: {c['nodes']} nodes, {c['triangles']} "
           f"triangles, {c['fibers']} fibers, {c['dofs']} DOFs, L = {100 * summary['body_size']:.2f} cm")
-    print("\n".join(_stage_table(summary["stages"], summary["body_size"])))
+    print("\n".join(_stage_table(summary["stages"])))
     print(f"total {summary['time_s']:.1f} s; recording: {summary['recording']}; export: {summary['export']}"
           + (f"; png: {summary['png']}" if "png" in summary else ""))
     return 0

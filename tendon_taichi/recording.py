@@ -61,7 +61,8 @@ def tension_colors(tau: np.ndarray, scale: float, threshold: float) -> np.ndarra
     return rgba
 
 
-def _settings_dict(s: OptimizeSettings) -> dict:
+def settings_dict(s: OptimizeSettings) -> dict:
+    """Optimize settings as plain JSON-able values."""
     d = dict(s.__dict__)
     d["homotopy"] = dict(s.homotopy.__dict__)
     return d
@@ -95,7 +96,7 @@ class Recorder:
         self._tmp = None
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec.save(str(self.path), default_blueprint=blueprint)
-        self.meta = {"format": FORMAT, **meta, "settings": _settings_dict(settings)}
+        self.meta = {"format": FORMAT, **meta, "settings": settings_dict(settings)}
 
     def write_header(self) -> None:
         """The static part: run metadata, scene, problem arrays, rest geometry."""

@@ -19,7 +19,7 @@ from .model import Model
 from .optimizer import (Iterate, RunCallbacks, SoftIK, StageResult, active_set, run_schedule,
                         state_solver)
 from .problem import Problem, build_problem
-from .recording import Recorder, RecordingError, completed_chunks, read_recording
+from .recording import Recorder, RecordingError, completed_chunks, read_recording, settings_dict
 from .scene import Scene
 
 #: a final pose error above this share of L draws a warning (the goals were not reached)
@@ -93,7 +93,7 @@ def _summary(problem: Problem, solver: str, stages: list, recording: Path, expor
     st = [s if isinstance(s, dict) else s.summary() for s in stages]
     out = {"scene": problem.scene.name, "resolution": problem.level, **counts,
            "body_size": problem.size, "solver": solver,
-           "settings": _settings_json(problem.scene.optimize), "stages": st,
+           "settings": settings_dict(problem.scene.optimize), "stages": st,
            "final": st[-1] if st else None, "recording": str(recording),
            "export": str(export) if export else None, "time_s": time.perf_counter() - t0}
     if ik is not None:
@@ -101,12 +101,6 @@ def _summary(problem: Problem, solver: str, stages: list, recording: Path, expor
         out["linear_iterations"] = ik.linear.stats.iterations
     out.update(extra)
     return out
-
-
-def _settings_json(s) -> dict:
-    d = dict(s.__dict__)
-    d["homotopy"] = dict(s.homotopy.__dict__)
-    return d
 
 
 def _recorded_stage(rs, problem: Problem) -> StageResult:
@@ -121,10 +115,11 @@ def _recorded_stage(rs, problem: Problem) -> StageResult:
 
 def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | Path | None = None,
              export: str | Path | None = None, log_every: int = 1, progress: Progress | None = None,
-             resume: str | Path | None = None) -> RunResult:
+             resume: str | Path | None = None, png: str | Path | None = None) -> RunResult:
     """Run the regularized soft IK on ``scene`` (or continue the run recorded in
     ``resume``), recording every stage to ``record`` and writing the final
-    problem export to ``export`` (default: beside the recording)."""
+    problem export to ``export`` (default: beside the recording); ``png``
+    draws stage 0 beside the final stage ("-": beside the recording)."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     completed: list[StageResult] = []
@@ -136,13 +131,11 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
         solver = run.meta.get("solver", solver)
         completed = [_recorded_stage(rs, problem) for rs in run.stages]
         record = Path(record) if record is not None else Path(resume)
-        run_id = run.meta.get("run_id")
         meta = dict(run.meta)
     else:
         problem = build_problem(scene, level)
         record = Path(record) if record is not None else Path(f"recordings/{scene.name}-r{problem.level}.rrd")
-        run_id = uuid.uuid4().hex
-        meta = {"version": __version__, "run_id": run_id, "scene": scene.name,
+        meta = {"version": __version__, "run_id": uuid.uuid4().hex, "scene": scene.name,
                 "resolution": problem.level, "solver": solver, "log_every": log_every}
     if record.suffix != ".rrd":
         raise InputError(f"the recording must be an .rrd file (got '{record}')")
@@ -154,6 +147,7 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
 
     recorder, tmp = _open_recorder(record, problem, settings, meta, log_every, resume, len(completed))
     step = [sum(s.iterations for s in completed)]
+    finished = list(completed)  # what the recording holds
 
     def on_iteration(it: Iterate):
         step[0] += 1
@@ -168,6 +162,7 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
         recorder.stage(st, step[0])
         if tmp is not None:
             _promote(tmp)
+        finished.append(st)
         progress.stage_done(st)
 
     callbacks = RunCallbacks([on_iteration], [on_stage_start], [on_stage])
@@ -176,16 +171,17 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
         stages = run_schedule(ik, callbacks, completed=completed)
     except KeyboardInterrupt:
         recorder.close()
-        done = _completed_count(record, tmp)
-        raise Interrupted(done, record, _summary(problem, solver, _stages_so_far(record, tmp), record,
-                                                 None, t0, ik, {"interrupted": True})) from None
+        raise Interrupted(len(finished), record, _summary(problem, solver, finished, record, None, t0, ik,
+                                                          {"interrupted": True})) from None
     recorder.close()
     if tmp is not None:
         _promote(tmp)
-    final = stages[-1]
-    x_final = final.x if final.x is not None else _resolve(ik, final)
-    s0 = stages[0]
-    write_export(export, problem, x_final, final.ac, final.tau, ac_stage0=s0.ac, tau_stage0=s0.tau,
+    final, s0 = stages[-1], stages[0]
+    for st in (s0, final):  # stages read back from a recording carry no positions
+        if st.x is None:
+            ik.configure(st.k)
+            st.x = ik.restart(st.r).x
+    write_export(export, problem, final.x, final.ac, final.tau, ac_stage0=s0.ac, tau_stage0=s0.tau,
                  r_final=final.r)
     warnings = []
     if s0.figures.pose_error_rel > UNREACHED:
@@ -198,14 +194,15 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
     extra = {"warnings": warnings, "interrupted": False}
     if resume is not None:
         extra["resumed_from"] = str(resume)
+    if png is not None:
+        png = record.with_suffix(".png") if str(png) == "-" else Path(png)
+        plot_stages(png, problem, [(f"stage 0 (unregularized): {s0.figures.active_fibers} active", s0.x, s0.tau),
+                                   (f"final stage {final.stage}: {final.figures.active_fibers} active",
+                                    final.x, final.tau)],
+                    settings.active_threshold * settings.tension_scale, settings.tension_scale)
+        extra["png"] = str(png)
     summary = _summary(problem, solver, stages, record, export, t0, ik, extra)
     return RunResult(problem, stages, summary, record, export, warnings)
-
-
-def _resolve(ik: SoftIK, st: StageResult) -> np.ndarray:
-    """The equilibrium of a recorded stage, solved from rest."""
-    ik.configure(st.k)
-    return ik.restart(st.r).x
 
 
 def _open_recorder(record: Path, problem, settings, meta, log_every, resume, n_done):
@@ -217,8 +214,6 @@ def _open_recorder(record: Path, problem, settings, meta, log_every, resume, n_d
     if resume is not None and Path(resume).resolve() == record.resolve():
         tmp = record.with_name(f".{record.stem}.resume.rrd")
         target = tmp
-    elif record.exists() and resume is None:
-        record.unlink()
     recorder = Recorder(target, problem, settings, meta, log_every)
     if resume is not None:
         recorder.copy_from(completed_chunks(resume, n_done))
@@ -232,20 +227,6 @@ def _promote(tmp) -> None:
     src, dst = tmp
     if src.exists():
         src.replace(dst)
-
-
-def _completed_count(record: Path, tmp) -> int:
-    try:
-        return len(read_recording(record).stages)
-    except RecordingError:
-        return 0
-
-
-def _stages_so_far(record: Path, tmp) -> list[dict]:
-    try:
-        return [s.summary for s in read_recording(record).stages]
-    except RecordingError:
-        return []
 
 
 # ---------------------------------------------------------------- replay
