@@ -195,16 +195,17 @@ def _point(F: ti.template(), I: ti.template(), xslot, p) -> vec2:
 
 
 @ti.func
-def _dot(F: ti.template(), I: ti.template(), aslot, bslot, out, serial: ti.template()):
-    """scalars[out] = sum_i a_i . b_i over nodes, deterministic."""
-    n = I[_N]
-    chunk = (n + _NB - 1) // _NB
+def _reduce(F: ti.template(), I: ti.template(), count, term: ti.template(), a, b, out,
+            serial: ti.template()):
+    """scalars[out] = sum of term(F, I, a, b, i) for i in [0, count): fixed blocks summed
+    in a fixed order, so the result does not depend on threads."""
+    chunk = (count + _NB - 1) // _NB
     op = I[_PARTIAL]
     ti.loop_config(serialize=serial)
     for blk in range(_NB):
         acc = 0.0
-        for i in range(blk * chunk, ti.min((blk + 1) * chunk, n)):
-            acc += _v(F, I, aslot, i).dot(_v(F, I, bslot, i))
+        for i in range(blk * chunk, ti.min((blk + 1) * chunk, count)):
+            acc += term(F, I, a, b, i)
         F[op + blk] = acc
     total = 0.0
     for blk in ti.static(range(_NB)):
@@ -213,20 +214,25 @@ def _dot(F: ti.template(), I: ti.template(), aslot, bslot, out, serial: ti.templ
 
 
 @ti.func
+def _node_dot(F: ti.template(), I: ti.template(), aslot, bslot, i) -> ti.f64:
+    return _v(F, I, aslot, i).dot(_v(F, I, bslot, i))
+
+
+@ti.func
+def _entry(F: ti.template(), I: ti.template(), slot, unused, i) -> ti.f64:
+    return _f(F, I, slot, i)
+
+
+@ti.func
+def _dot(F: ti.template(), I: ti.template(), aslot, bslot, out, serial: ti.template()):
+    """scalars[out] = sum_i a_i . b_i over nodes."""
+    _reduce(F, I, I[_N], _node_dot, aslot, bslot, out, serial)
+
+
+@ti.func
 def _sum(F: ti.template(), I: ti.template(), slot, count, out, serial: ti.template()):
-    """scalars[out] = sum of the f64 array at ``slot`` [0, count), deterministic."""
-    chunk = (count + _NB - 1) // _NB
-    op = I[_PARTIAL]
-    ti.loop_config(serialize=serial)
-    for blk in range(_NB):
-        acc = 0.0
-        for i in range(blk * chunk, ti.min((blk + 1) * chunk, count)):
-            acc += _f(F, I, slot, i)
-        F[op + blk] = acc
-    total = 0.0
-    for blk in ti.static(range(_NB)):
-        total += F[op + blk]
-    _set_sc(F, I, out, total)
+    """scalars[out] = sum of the f64 array at ``slot`` over [0, count)."""
+    _reduce(F, I, count, _entry, slot, 0, out, serial)
 
 
 @ti.func
