@@ -117,12 +117,12 @@ class ContinuityTerm:
 
 
 class ContractionTerm:
-    """O_reg = weight sum_i (ac_i / a0_i)^2."""
+    """O_reg = weight sum_i (ac_i / a0_i)^2 over cables of rest lengths ``a0`` (m)."""
 
     name = "contraction"
 
-    def __init__(self, problem: Problem, weight: float):
-        self.weight, self.a0 = weight, problem.fibers.a0
+    def __init__(self, a0: np.ndarray, weight: float):
+        self.weight, self.a0 = weight, np.asarray(a0, dtype=float)
 
     def evaluate(self, state: State) -> TermValue:
         r = state.ac / self.a0

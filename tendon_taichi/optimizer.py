@@ -107,25 +107,29 @@ class SoftIK:
     """The objective over ``r = ac / a0`` and its adjoint gradient, on one model.
 
     ``solver``: the linear backend of both the equilibrium and the adjoint
-    (``cg``, ``direct`` or ``auto``); ``model`` may be shared (compiled kernels
-    are shared anyway).
+    (``cg``, ``direct`` or ``auto``). With ``cables`` (the tendons of a
+    realizable robot) instead of the fiber lattice, the objective is the pose and
+    the contraction regularizer only.
     """
 
     def __init__(self, problem: Problem, settings: OptimizeSettings, solver: str = "auto",
-                 model: Model | None = None):
+                 cables=None):
         self.problem, self.settings = problem, settings
-        self.model = model or Model.from_problem(problem)
+        self.model = Model.from_problem(problem, cables=cables)
         self.newton = NewtonSolver(self.model, solver, reuse=True)
         self.linear = self.newton.linear
         self.state_newton = state_solver(self.model, self.linear)
-        self.a0 = problem.fibers.a0
         s = settings
-        self.objective = Objective([
-            PoseTerm(problem),
-            SparsityTerm(problem, s.sparsity, s.sparsity_measure, s.homotopy.k0),
-            ContinuityTerm(problem, s.continuity, s.tension_scale, s.continuity_measure),
-            ContractionTerm(problem, s.contraction_reg),
-        ])
+        if cables is None:
+            self.a0 = problem.fibers.a0
+            terms = [PoseTerm(problem),
+                     SparsityTerm(problem, s.sparsity, s.sparsity_measure, s.homotopy.k0),
+                     ContinuityTerm(problem, s.continuity, s.tension_scale, s.continuity_measure),
+                     ContractionTerm(self.a0, s.contraction_reg)]
+        else:
+            self.a0 = cables.a0
+            terms = [PoseTerm(problem), ContractionTerm(self.a0, s.contraction_reg)]
+        self.objective = Objective(terms)
         self.k: float | None = None
         self.configure(None)
         self.evaluations = 0
@@ -217,7 +221,7 @@ class SoftIK:
         p = self.problem
         tau = self.model.tensions()
         err = np.linalg.norm(p.target_positions(x) - p.target_goal, axis=1)
-        active = tau > self.settings.active_threshold * self.settings.tension_scale
+        active = active_set(tau, self.settings)
         pe = float(np.sqrt((err ** 2).sum()))
         return Figures(pe, pe / p.size, float(err.max()), int(active.sum()),
                        float(self.a0[active].sum()), float(tau.max()), dict(ev.terms))
@@ -330,7 +334,7 @@ def run_schedule(ik: SoftIK, callbacks: RunCallbacks | None = None,
     if stages:
         r = stages[-1].r
     else:
-        r = np.full(ik.problem.fibers.n_fibers, s.initial_contraction) if r0 is None else np.asarray(r0)
+        r = np.full(len(ik.a0), s.initial_contraction) if r0 is None else np.asarray(r0)
     while not (stages and schedule_done(stages, s)):
         st = run_stage(ik, len(stages), r, callbacks)
         stages.append(st)

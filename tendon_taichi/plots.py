@@ -57,3 +57,47 @@ def plot_stages(path: str | Path, problem: Problem, panels: list[tuple[str, np.n
         fig.savefig(tmp, dpi=130, format="png")
     plt.close(fig)
     return Path(path)
+
+
+def plot_compare(path: str | Path, extraction) -> Path:
+    """The idealized tension pattern beside each extractor's tendons drawn on its
+    realizable robot's equilibrium (targets blue, goals green)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .export import atomic_path
+
+    p, st = extraction.problem, extraction.state
+    ok = [r for r in extraction.results if r.error is None]
+    fig, axes = plt.subplots(1, 1 + len(ok), figsize=(4.2 * (1 + len(ok)), 4.0), squeeze=False)
+    scale = max(float(st.tau.max()), 1e-9)
+    lc = _axes_tensions(axes[0][0], p, st.x, st.tau, st.active_threshold, scale / 2.0,
+                        f"idealized (stage {extraction.stage}): {int(st.active.sum())} active, "
+                        f"{100 * extraction.idealized_pose_error / p.size:.2f}% pose")
+    T = p.mesh.triangles
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for ax, r in zip(axes[0][1:], ok):
+        x = r.realizable.x
+        ax.triplot(p.mesh.nodes[:, 0], p.mesh.nodes[:, 1], T, color="0.88", lw=0.4)
+        ax.triplot(x[:, 0], x[:, 1], T, color="0.72", lw=0.4)
+        c = p.fibers.embedding.positions(T, x)
+        for i, t in enumerate(r.tendons):
+            path_xy = c[t.nodes]
+            ax.plot(path_xy[:, 0], path_xy[:, 1], color=colors[i % len(colors)], lw=2.2)
+            ax.plot(*path_xy[0], "o", color=colors[i % len(colors)], ms=4)
+            ax.plot(*path_xy[-1], "s", color=colors[i % len(colors)], ms=4)
+        now, goal = p.target_positions(x), p.target_goal
+        ax.scatter(goal[:, 0], goal[:, 1], s=40, marker="x", color="tab:green", zorder=5)
+        ax.scatter(now[:, 0], now[:, 1], s=18, color="tab:blue", zorder=5)
+        m = r.metrics
+        ax.set_title(f"{r.name}: {m['count']} tendons, {m['kinks']} kinks\n"
+                     f"realizable pose {100 * m['realizable_pose_error_rel']:.2f}% of L", fontsize=9)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.colorbar(lc, ax=axes[0][0], shrink=0.7, label="fiber tension (N)")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=130, format="png")
+    plt.close(fig)
+    return Path(path)

@@ -43,7 +43,19 @@ class RecordingError(TendonError):
     """A recording is missing, corrupt, foreign or incomplete."""
 
 
-def _edges(triangles: np.ndarray) -> np.ndarray:
+def default_blueprint():
+    """The viewer layout: the body (2D) beside the objective and figure time series."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(rrb.Horizontal(
+        rrb.Spatial2DView(origin="/", name="body", contents=["/world/**", "/tendons/**"]),
+        rrb.Vertical(rrb.TimeSeriesView(origin="/metrics/objective", name="objective terms"),
+                     rrb.TimeSeriesView(origin="/metrics/figures", name="pose error, active fibers")),
+        column_shares=[3, 2]))
+
+
+def mesh_edges(triangles: np.ndarray) -> np.ndarray:
+    """The unique edges (e, 2) of a triangle mesh."""
     e = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), 1)
     return np.unique(e, axis=0)
 
@@ -80,22 +92,15 @@ class Recorder:
     def __init__(self, path: str | Path, problem: Problem, settings: OptimizeSettings,
                  meta: dict, log_every: int = 1):
         import rerun as rr
-        import rerun.blueprint as rrb
 
         self.rr = rr
         self.path = Path(path)
         self.problem, self.settings = problem, settings
         self.log_every = max(1, int(log_every))
-        self.edges = _edges(problem.mesh.triangles)
+        self.edges = mesh_edges(problem.mesh.triangles)
         self.rec = rr.RecordingStream(APP_ID, recording_id=meta.get("run_id"))
-        blueprint = rrb.Blueprint(rrb.Horizontal(
-            rrb.Spatial2DView(origin="/world", name="body"),
-            rrb.Vertical(rrb.TimeSeriesView(origin="/metrics/objective", name="objective terms"),
-                         rrb.TimeSeriesView(origin="/metrics/figures", name="pose error, active fibers")),
-            column_shares=[3, 2]))
-        self._tmp = None
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.rec.save(str(self.path), default_blueprint=blueprint)
+        self.rec.save(str(self.path), default_blueprint=default_blueprint())
         self.meta = {"format": FORMAT, **meta, "settings": settings_dict(settings)}
 
     def write_header(self) -> None:
@@ -230,7 +235,7 @@ def _complete_prefix(path: Path) -> int:
     return good
 
 
-def _chunks(path: Path):
+def read_chunks(path: Path):
     """All chunks of the first recording store, tolerating a torn tail."""
     from rerun.chunk import RrdReader
 
@@ -280,7 +285,7 @@ def read_recording(path: str | Path) -> RecordedRun:
     with open(path, "rb") as fh:
         if fh.read(4) != b"RRF2":
             raise RecordingError(f"'{path}' is not a rerun recording (.rrd)")
-    chunks, truncated = _chunks(path)
+    chunks, truncated = read_chunks(path)
     meta, scene, arrays = None, None, {}
     stages: dict[int, dict] = {}
     for ch in chunks:
@@ -314,7 +319,7 @@ def read_recording(path: str | Path) -> RecordedRun:
 def completed_chunks(path: str | Path, stages: int):
     """The chunks of a recording that belong to its header and first ``stages`` stages
     (what a resumed run copies)."""
-    chunks, _ = _chunks(Path(path))
+    chunks, _ = read_chunks(Path(path))
     keep = []
     for ch in chunks:
         if "stage" not in ch.timeline_names:

@@ -1,0 +1,88 @@
+"""The realizable robot (DESIGN.md section 2): the body with only the extracted
+tendons, each a sliding cable through its waypoints (the fiber nodes it
+follows) with one rest length and one tension. Its tendon contractions are
+found by the same soft IK as the idealized robot (pose objective, bounds
+[-pmax, cmax] on c / L0, adjoint gradient) - a handful of variables."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .cables import CableSet
+from .extraction import IdealizedState, Tendon
+from .mesh import Embedding
+from .model import Model
+from .optimizer import RunCallbacks, SoftIK, run_stage
+from .problem import Problem
+from .scene import OptimizeSettings
+from .solvers import NewtonSolver
+
+
+@dataclass
+class RealizableResult:
+    """Tendon contractions ``contraction`` (T,) m and ratios (T,), tensions ``tau``
+    (T,) N, the equilibrium ``x`` (n, 2), pose errors (m; relative to L), and cost."""
+
+    contraction: np.ndarray
+    ratios: np.ndarray
+    tau: np.ndarray
+    x: np.ndarray
+    pose_error: float
+    pose_error_rel: float
+    pose_error_max: float
+    iterations: int
+    evaluations: int
+    time_s: float
+
+
+def tendon_cables(problem: Problem, tendons: list[Tendon]) -> CableSet:
+    """Tendons as many-segment cables through their fiber nodes (embedded exactly as
+    the fiber nodes are), with the scene's fiber stiffness as EA."""
+    emb = problem.fibers.embedding
+    ids = np.concatenate([t.nodes for t in tendons]).astype(np.int64)
+    segs, start, base = [], [0], 0
+    for t in tendons:
+        k = len(t.nodes)
+        segs.append(base + np.stack([np.arange(k - 1), np.arange(1, k)], axis=1))
+        start.append(start[-1] + k - 1)
+        base += k
+    a0 = np.array([t.length for t in tendons])
+    return CableSet(Embedding(emb.tri[ids], emb.bary[ids]), np.concatenate(segs),
+                    np.array(start, dtype=np.int64), a0, np.full(len(tendons), problem.scene.fibers.stiffness))
+
+
+def warm_ratios(problem: Problem, tendons: list[Tendon], state: IdealizedState) -> np.ndarray:
+    """Starting c / L0 per tendon: the contraction that gives the tendon its source
+    strand's mean tension at the idealized equilibrium (Z'(e) = tau / EA)."""
+    fs = problem.scene.fibers
+    EA, eps = fs.stiffness, fs.eps
+    c = problem.fibers.embedding.positions(problem.mesh.triangles, state.x) if state.x is not None \
+        else problem.fibers.nodes
+    out = []
+    for t in tendons:
+        L = float(np.linalg.norm(np.diff(c[t.nodes], axis=0), axis=1).sum())
+        z1 = max(t.tension, 0.0) / EA
+        e = z1 + 0.5 * eps if z1 >= 0.5 * eps else np.sqrt(2.0 * eps * z1)
+        out.append((t.length - L / (1.0 + e)) / t.length)
+    return np.clip(np.array(out), -fs.max_payout, fs.max_contraction)
+
+
+def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedState,
+                     settings: OptimizeSettings, solver: str = "auto") -> RealizableResult:
+    """Solve the realizable robot's tendon contractions for the problem's targets."""
+    t0 = time.perf_counter()
+    L = problem.size
+    if not tendons:  # the bare body (it sags under gravity, if any)
+        x = NewtonSolver(Model.from_problem(problem, cables=CableSet.empty()), solver).solve().x
+        err = np.linalg.norm(problem.target_positions(x) - problem.target_goal, axis=1)
+        pe = float(np.sqrt((err ** 2).sum()))
+        return RealizableResult(np.zeros(0), np.zeros(0), np.zeros(0), x, pe, pe / L, float(err.max()),
+                                0, 0, time.perf_counter() - t0)
+    ik = SoftIK(problem, settings, solver, cables=tendon_cables(problem, tendons))
+    st = run_stage(ik, 0, warm_ratios(problem, tendons, state), RunCallbacks())
+    err = np.linalg.norm(problem.target_positions(st.x) - problem.target_goal, axis=1)
+    return RealizableResult(st.ac, st.r, st.tau, st.x, st.figures.pose_error, st.figures.pose_error_rel,
+                            float(err.max()), st.iterations, st.evaluations, time.perf_counter() - t0)

@@ -1,0 +1,128 @@
+"""extract / compare / extractors from the command line, a third-party plugin, and
+bad input."""
+
+import json
+import os
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from tendon_taichi.recording import read_recording
+
+PLUGIN = Path(__file__).parent / "plugins" / "demo_extractor"
+
+
+@pytest.fixture(scope="module")
+def run_rrd(tmp_path_factory):
+    from conftest import run_cli
+
+    d = tmp_path_factory.mktemp("ext")
+    r = run_cli("optimize", "t_shape", "--stage-iterations", "25", "--k-min", "0.1", "--record", d / "run.rrd",
+                "--quiet", cwd=d)
+    assert r.returncode == 0, r.stderr
+    return d / "run.rrd"
+
+
+@pytest.fixture(scope="module")
+def plugin_path(tmp_path_factory):
+    """The demo plugin installed (pip, no build isolation) into a folder of its own."""
+    target = tmp_path_factory.mktemp("site")
+    r = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
+                        "--no-index", "--target", str(target), str(PLUGIN)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return target
+
+
+def test_extractors_lists_the_builtins(cli):
+    r = cli("extractors", "--json")
+    assert r.returncode == 0, r.stderr
+    names = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
+    assert {"strands", "network_discovery", "path_cover"} <= set(names)
+    assert names["path_cover"]["options"]["max_turn"] == 60.0
+
+
+def test_extract_writes_json_svg_and_logs_into_the_recording(run_rrd, cli, tmp_path):
+    rec = tmp_path / "copy.rrd"
+    rec.write_bytes(run_rrd.read_bytes())
+    svg = tmp_path / "t.svg"
+    r = cli("extract", rec, "--extractor", "path_cover", "--option", "min_length=0.005", "--svg", svg, "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["stage"] == 4 and len(out["extractors"]) == 1
+    e = out["extractors"][0]
+    assert e["name"] == "path_cover"
+    for key in ("count", "total_length", "total_turning", "max_turn", "kinks", "capstan_worst", "tension_cv",
+                "coverage", "realizable_pose_error", "realizable_pose_error_rel", "idealized_pose_error_rel"):
+        assert key in e["metrics"]
+    assert e["metrics"]["count"] == len(e["tendons"]) >= 1
+    for t in e["tendons"]:
+        assert set(t) >= {"waypoints", "length", "tension", "contraction"}
+    root = ET.parse(svg).getroot()
+    assert len(root.findall(".//{http://www.w3.org/2000/svg}polyline")) == len(e["tendons"])
+    # logged at the stage it came from; the file stays a valid recording of the run
+    from rerun.chunk import RrdReader
+    ents = {c.entity_path for c in RrdReader(rec).stream()}
+    assert "/tendons/path_cover/summary" in ents and "/tendons/path_cover/rest" in ents
+    assert len(read_recording(rec).stages) == 5
+    assert json.loads(cli("replay", rec, "--json").stdout)["reproduces"]
+    r2 = cli("extract", rec, "--extractor", "path_cover", "--stage", 2, "--no-record", "--json")
+    assert json.loads(r2.stdout)["stage"] == 2
+
+
+def test_compare_runs_every_extractor_with_a_picture(run_rrd, cli, tmp_path):
+    png = tmp_path / "c.png"
+    r = cli("compare", run_rrd, "--png", png, "--no-record", "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert {e["name"] for e in out["extractors"]} >= {"strands", "network_discovery", "path_cover"}
+    assert all("error" not in e for e in out["extractors"]) and png.stat().st_size > 10000
+    table = cli("compare", run_rrd, "--no-record", "--extractors", "strands", "path_cover").stdout
+    assert "strands" in table and "path_cover" in table and "realizable" in table
+
+
+def test_third_party_plugin_is_listed_and_used(run_rrd, cli, plugin_path):
+    env = {"PYTHONPATH": os.pathsep.join([str(plugin_path), os.environ.get("PYTHONPATH", "")])}
+    r = cli("extractors", "--json", env=env)
+    names = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
+    assert names["strongest"]["distribution"] == "demo-extractor"
+    assert "error" in names["broken"]  # a plugin that cannot be imported is reported, not fatal
+    r = cli("compare", run_rrd, "--no-record", "--extractors", "strongest", "strands", "--json", env=env)
+    assert r.returncode == 0, r.stderr
+    out = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
+    assert out["strongest"]["metrics"]["count"] == 1 and "error" not in out["strands"]
+
+
+def test_failing_plugins_do_not_stop_the_others(run_rrd, cli, plugin_path):
+    env = {"PYTHONPATH": os.pathsep.join([str(plugin_path), os.environ.get("PYTHONPATH", "")])}
+    r = cli("compare", run_rrd, "--no-record", "--extractors", "raises", "broken", "path_cover", "--json", env=env)
+    assert r.returncode == 4
+    out = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
+    assert "raised RuntimeError: this plugin always fails" in out["raises"]["error"]
+    assert "failed to load" in out["broken"]["error"]
+    assert "error" not in out["path_cover"] and out["path_cover"]["metrics"]["count"] >= 0
+    errors = [line for line in r.stderr.splitlines() if line.startswith("tendon-taichi: error:")]
+    assert len(errors) == 2 and "Traceback" not in r.stderr
+
+
+def _one_line(r, text):
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode != 0 and len(lines) == 1 and text in lines[0], r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_extract_bad_input(run_rrd, cli, tmp_path):
+    _one_line(cli("extract", run_rrd, "--extractor", "nope", "--no-record"), "unknown extractor 'nope'")
+    _one_line(cli("extract", run_rrd, "--extractor", "strands", "--option", "speed=3", "--no-record"),
+              "has no option 'speed'")
+    _one_line(cli("extract", run_rrd, "--extractor", "strands", "--stage", 9, "--no-record"), "--stage 9")
+    _one_line(cli("extract", tmp_path / "none.rrd", "--extractor", "strands"), "does not exist")
+    from tendon_taichi import build_problem, load_scene
+    from tendon_taichi.recording import Recorder
+    p = build_problem(load_scene("finger"), 1)
+    empty = Recorder(tmp_path / "empty.rrd", p, p.scene.optimize, {"run_id": "e", "resolution": 1})
+    empty.write_header()
+    empty.close()
+    _one_line(cli("compare", tmp_path / "empty.rrd"), "no completed stage")
