@@ -20,6 +20,7 @@ import numpy as np
 from .errors import InputError, TendonError
 
 PROG = "tendon-taichi"
+SOLVER_CHOICES = ("auto", "cg", "cg-jacobi", "direct")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -131,11 +132,10 @@ def cmd_simulate(args) -> int:
     _json_out(args, summary)
     if args.json == "-":
         return 0
-    lin = "CG" if args.solver == "cg" else "direct"
     print(f"{scene.name} level {problem.level}: {counts['nodes']} nodes, {counts['triangles']} "
           f"triangles, {counts['fibers']} fibers, {counts['dofs']} DOFs")
     print(f"equilibrium: {eq.newton_iterations} Newton iterations"
-          + (f", {eq.linear_iterations} {lin} iterations" if args.solver == "cg" else f" ({lin})")
+          + (f", {eq.linear_iterations} CG iterations" if args.solver != "direct" else " (direct)")
           + f", relative residual {eq.residual:.1e}, {eq.time_s:.3f} s")
     print(f"max displacement {1e3 * disp.max():.2f} mm, max tension {eq.tau.max():.3f} N, "
           f"pose error {1e3 * summary['pose_error']:.2f} mm ({100 * summary['pose_error_rel']:.2f} % of L)")
@@ -378,7 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="contract every fiber by the ratio C of its rest length")
     g.add_argument("--contract", metavar="FILE.npy",
                    help="per-fiber contraction ratios (ac/a0), one per fiber")
-    s.add_argument("--solver", choices=("auto", "cg", "direct"), default="auto",
+    s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto",
                    help="linear solver: matrix-free Taichi PCG, sparse direct, or auto (default: "
                         "picks by problem size)")
     s.add_argument("--export", metavar="OUT.npz",
@@ -392,7 +392,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--resolution", type=int, default=1, metavar="N", help="resolution level (default 1)")
     s.add_argument("--record", metavar="RUN.rrd", help="recording (default recordings/<scene>-r<N>.rrd)")
     s.add_argument("--export", metavar="OUT.npz", help="final problem export (default: beside the recording)")
-    s.add_argument("--solver", choices=("auto", "cg", "direct"), default="auto",
+    s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto",
                    help="linear solver of equilibria and adjoints (default auto: by problem size)")
     s.add_argument("--resume", metavar="RUN.rrd",
                    help="continue an interrupted run from its last completed stage (into --record, "
@@ -410,7 +410,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("replay", help="re-solve a recording's stages and check they reproduce")
     s.add_argument("recording", metavar="RUN.rrd")
     s.add_argument("--stage", type=int, default=None, metavar="N", help="only this stage")
-    s.add_argument("--solver", choices=("recorded", "auto", "cg", "direct"), default="recorded",
+    s.add_argument("--solver", choices=("recorded",) + SOLVER_CHOICES, default="recorded",
                    help="linear solver (default: the one the run used)")
     s.add_argument("--png", nargs="?", const="-", metavar="FILE",
                    help="picture of stage 0 and the last replayed stage (default: beside the recording)")
@@ -435,7 +435,7 @@ def build_parser() -> argparse.ArgumentParser:
                            help="idealized pattern beside each extractor's realizable robot")
         s.add_argument("--option", action="append", default=[], metavar="K=V",
                        help="extractor option (compare: NAME.K=V); repeatable")
-        s.add_argument("--solver", choices=("recorded", "auto", "cg", "direct"), default="recorded")
+        s.add_argument("--solver", choices=("recorded",) + SOLVER_CHOICES, default="recorded")
         s.add_argument("--no-record", action="store_true", help="do not log the tendons into the recording")
         _add_json(s)
         s.set_defaults(func=cmd_extract if name == "extract" else cmd_compare)

@@ -435,7 +435,9 @@ def _apply_hessian(F: ti.template(), I: ti.template(), src, dst, masked: ti.temp
 
 
 @ti.func
-def _cg_begin(F: ti.template(), I: ti.template(), warm: ti.i32, tol: ti.f64, serial: ti.template()):
+def _cg_residual(F: ti.template(), I: ti.template(), warm: ti.i32, serial: ti.template()):
+    """Mask the right-hand side CB, start CX at 0 (or the last solution, ``warm``)
+    and set CR = CB - H CX; scalars BB = |CB|^2 and RR = |CR|^2."""
     ti.loop_config(serialize=serial)
     for i in range(I[_N]):
         m = _v(F, I, _MASK, i)
@@ -447,14 +449,20 @@ def _cg_begin(F: ti.template(), I: ti.template(), warm: ti.i32, tol: ti.f64, ser
     _apply_hessian(F, I, _CX, _CQ, True, serial)
     ti.loop_config(serialize=serial)
     for i in range(I[_N]):
-        r = _v(F, I, _CB, i) - _v(F, I, _CQ, i)
-        z = _m2(F, I, _MINV, i) @ r
-        _set_v(F, I, _CR, i, r)
+        _set_v(F, I, _CR, i, _v(F, I, _CB, i) - _v(F, I, _CQ, i))
+    _dot(F, I, _CR, _CR, _RR, serial)
+    _dot(F, I, _CB, _CB, _BB, serial)
+
+
+@ti.func
+def _cg_begin(F: ti.template(), I: ti.template(), warm: ti.i32, tol: ti.f64, serial: ti.template()):
+    _cg_residual(F, I, warm, serial)
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        z = _m2(F, I, _MINV, i) @ _v(F, I, _CR, i)
         _set_v(F, I, _CZ, i, z)
         _set_v(F, I, _CP, i, z)
     _dot(F, I, _CR, _CZ, _RZ, serial)
-    _dot(F, I, _CR, _CR, _RR, serial)
-    _dot(F, I, _CB, _CB, _BB, serial)
     _set_sc(F, I, _TOL2, tol * tol * _sc(F, I, _BB))
     _set_cg(I, _ITERS, 0)
     _set_cg(I, _NEGCURV, 0)
@@ -567,6 +575,52 @@ def _k_cg_step(F: F64, I: I32):
 @ti.kernel
 def _k_cg_done(I: I32) -> ti.i32:
     return _cg(I, _DONE)
+
+
+# PCG driven from the host, for a preconditioner applied there (a factorization):
+# three launches per iteration, the residual going out and the preconditioned one in.
+NDARRAY = ti.types.ndarray(dtype=ti.f64, ndim=1)
+
+
+@ti.kernel
+def _k_pcg_begin(F: F64, I: I32, warm: ti.i32, r_out: NDARRAY, serial: ti.template()) -> vec2:
+    """CR = CB - H CX0 (copied to r_out as 2n values); returns (|CB|^2, |CR|^2)."""
+    _cg_residual(F, I, warm, serial)
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        r = _v(F, I, _CR, i)
+        r_out[2 * i], r_out[2 * i + 1] = r[0], r[1]
+    return vec2(_sc(F, I, _BB), _sc(F, I, _RR))
+
+
+@ti.kernel
+def _k_pcg_matvec(F: F64, I: I32, serial: ti.template()) -> ti.f64:
+    """CQ = H CP on the free DOFs; returns CP . CQ."""
+    _apply_hessian(F, I, _CP, _CQ, True, serial)
+    _dot(F, I, _CP, _CQ, _PQ, serial)
+    return _sc(F, I, _PQ)
+
+
+@ti.kernel
+def _k_pcg_update(F: F64, I: I32, alpha: ti.f64, r_out: NDARRAY, serial: ti.template()) -> ti.f64:
+    """CX += alpha CP, CR -= alpha CQ (copied to r_out); returns |CR|^2."""
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        _set_v(F, I, _CX, i, _v(F, I, _CX, i) + alpha * _v(F, I, _CP, i))
+        r = _v(F, I, _CR, i) - alpha * _v(F, I, _CQ, i)
+        _set_v(F, I, _CR, i, r)
+        r_out[2 * i], r_out[2 * i + 1] = r[0], r[1]
+    _dot(F, I, _CR, _CR, _RR, serial)
+    return _sc(F, I, _RR)
+
+
+@ti.kernel
+def _k_pcg_direction(F: F64, I: I32, z_in: NDARRAY, beta: ti.f64, serial: ti.template()):
+    """CP = z + beta CP with z the preconditioned residual (masked)."""
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        z = vec2(z_in[2 * i], z_in[2 * i + 1]) * _v(F, I, _MASK, i)
+        _set_v(F, I, _CP, i, z + beta * _v(F, I, _CP, i))
 
 
 @ti.kernel
@@ -936,6 +990,38 @@ class Model:
         it = self._cg_state(_ITERS)
         res = float(np.sqrt(sc[_RR] / sc[_BB])) if sc[_BB] > 0 else 0.0
         return CGStatus(it, bool(res <= tol), bool(self._cg_state(_NEGCURV)), res)
+
+    def pcg_solve(self, rhs: np.ndarray | None, tol: float, max_iter: int, precondition,
+                  warm: bool = False) -> CGStatus:
+        """Solve H y = rhs on the free DOFs by CG preconditioned on the host:
+        ``precondition(r)`` maps a residual (2n,) to z (2n,), e.g. a factorization's
+        solve. H products stay in Taichi (as last prepared); the solution stays in
+        the solver (:meth:`cg_solution`)."""
+        if rhs is not None:
+            self._write("CB", np.asarray(rhs, dtype=np.float64).reshape(self.n, 2))
+        r = np.empty(2 * self.n)
+        bb, rr = _k_pcg_begin(self.F, self.I, 1 if warm else 0, r, self.serial)
+        tol2 = tol * tol * bb
+        it, negcurv = 0, False
+        if rr > tol2:
+            z = precondition(r)
+            rz = float(r @ z)
+            _k_pcg_direction(self.F, self.I, z, 0.0, self.serial)
+            while it < max_iter:
+                pq = _k_pcg_matvec(self.F, self.I, self.serial)
+                if pq <= 0.0:
+                    negcurv = True
+                    break
+                rr = _k_pcg_update(self.F, self.I, rz / pq, r, self.serial)
+                it += 1
+                if rr <= tol2:
+                    break
+                z = precondition(r)
+                rz_new = float(r @ z)
+                _k_pcg_direction(self.F, self.I, z, rz_new / rz, self.serial)
+                rz = rz_new
+        res = float(np.sqrt(rr / bb)) if bb > 0 else 0.0
+        return CGStatus(it, bool(res <= tol), negcurv, res)
 
     def cg_solution(self) -> np.ndarray:
         return self._nodes("CX")

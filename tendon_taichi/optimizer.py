@@ -30,7 +30,7 @@ from .objectives import (ContinuityTerm, ContractionTerm, Evaluation, Objective,
                          SparsityTerm, State)
 from .problem import Problem
 from .scene import OptimizeSettings
-from .solvers import CGSolver, Equilibrium, NewtonSolver
+from .solvers import Equilibrium, NewtonSolver
 
 #: relative tolerance of the adjoint solve (the gradient's accuracy)
 ADJOINT_TOL = 1e-10
@@ -156,8 +156,7 @@ class SoftIK:
         self._lambda_warm = False
         self._last = None
         self._pred = None
-        if hasattr(self.linear, "factor"):
-            self.linear.factor = None
+        self.linear.reset()
         return self.state_newton.solve(ac=np.asarray(r, dtype=float) * self.a0, x0=self.problem.mesh.nodes)
 
     # ------------------------------------------------------------ evaluation
@@ -168,8 +167,8 @@ class SoftIK:
             return None
         x_last, ac_last = self._pred
         self._pred = None
-        dx = -self.linear.solve_last(self.model.mixed_product(ac - ac_last))
-        return x_last + dx
+        dx = self.linear.approx_solve(self.model.mixed_product(ac - ac_last))
+        return None if dx is None else x_last - dx
 
     def _solve(self, r: np.ndarray) -> Equilibrium:
         """The equilibrium for r, warm started from the last one (plus a prediction)."""
@@ -200,19 +199,17 @@ class SoftIK:
         lam = self._adjoint(dOdx)
         dOdac = ev.dac + ev.dtau * cab["tau_ac"] - m.mixed_transpose_product(lam)
         self._x_last = eq.x
-        if getattr(self.linear, "factor", None) is not None:
-            self._pred = (eq.x, ac)
+        self._pred = (eq.x, ac)
         grad = dOdac * self.a0
         self.evaluations += 1
         self._last = (r, ev.total, grad, ev, eq.x)
         return ev.total, grad
 
     def _adjoint(self, rhs: np.ndarray) -> np.ndarray:
-        if isinstance(self.linear, CGSolver):
-            lam = self.linear.solve(rhs, tol=ADJOINT_TOL, warm=self._lambda_warm)
-            self._lambda_warm = True
-            return lam
-        return self.linear.solve(rhs, tol=ADJOINT_TOL)
+        """lambda = H^-1 dO/dx, warm started from the last one (iterative backends)."""
+        lam = self.linear.solve(rhs, tol=ADJOINT_TOL, warm=self._lambda_warm)
+        self._lambda_warm = True
+        return lam
 
     def figures(self, r: np.ndarray) -> Figures:
         """Figures at r (evaluated if it is not the last point)."""

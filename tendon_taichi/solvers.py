@@ -11,10 +11,13 @@
   triangle (``det F <= 0``);
 * converged when ``|g_free| <= tol * F`` with the force scale ``F = E h L``.
 
-Backends (``LinearSolver`` protocol): ``cg`` - matrix-free block-Jacobi PCG in
-Taichi (one kernel launch per iteration, or one per solve for serialized
-small models); ``direct`` - the same Hessian assembled into a scipy sparse
-matrix and factorized with SuperLU.
+Backends (``LinearSolver`` protocol): ``cg`` - PCG with the Hessian products in
+Taichi, preconditioned by a reused factorization of the Hessian at a nearby
+state (refreshed when a solve needs more than 20 iterations); ``cg-jacobi`` -
+block-Jacobi PCG entirely in Taichi (one kernel launch per iteration, or one
+per solve for serialized small models); ``direct`` - the same Hessian assembled
+into a scipy sparse matrix and factorized with SuperLU; ``auto`` - direct up to
+5000 free DOFs, cg above (measured).
 """
 
 from __future__ import annotations
@@ -30,11 +33,14 @@ import scipy.sparse.linalg as spla
 from .errors import ConvergenceError, InputError
 from .model import CGStatus, Model
 
-SOLVERS = ("auto", "cg", "direct")
+SOLVERS = ("auto", "cg", "cg-jacobi", "direct")
 
-#: ``auto`` takes the direct backend up to this many free DOFs (measured on the
-#: 2-core CPU machine: direct is faster for t_shape levels 1-5, up to 10504 DOFs)
-AUTO_DIRECT_MAX_DOFS = 20000
+#: ``auto`` takes the direct backend up to this many free DOFs and the
+#: factorization-preconditioned CG above. Measured on the 2-core CPU machine
+#: (t_shape): inside the optimizer direct is 5-30 % faster at levels 1-3
+#: (714-2716 DOFs) and even at level 4 (5336); single warm-started equilibria are
+#: faster with CG from level 3 on (level 5, 10504 DOFs: 194 ms against 305 ms).
+AUTO_DIRECT_MAX_DOFS = 5000
 
 
 def resolve_solver(name: str, dofs: int) -> str:
@@ -85,41 +91,112 @@ class LinearSolver(Protocol):
         """y (n, 2) with H y = rhs on the free DOFs (exact H at x, zero on fixed DOFs)."""
 
 
+PRECONDITIONERS = ("factor", "jacobi")
+
+
+class FactorPreconditioner:
+    """M^-1 = a SuperLU factorization of the PSD-projected Hessian at a reference
+    state (SPD, as CG needs), reused while the solves it preconditions stay short:
+    a solve that takes more than ``refresh_iterations`` marks it stale, and the
+    next solve refreshes it at the state of the moment (DESIGN.md section 8: a
+    factorization at a nearby design preconditions to a few tens of iterations)."""
+
+    def __init__(self, model: Model, refresh_iterations: int = 20):
+        self.direct = DirectSolver(model)
+        self.refresh_iterations = refresh_iterations
+        self.lu = None
+        self.refreshes = 0
+
+    @property
+    def stale(self) -> bool:
+        return self.lu is None
+
+    def refresh(self) -> None:
+        """Factorize the projected Hessian at the model's current state (this leaves
+        the model's element tangents projected: prepare them again afterwards)."""
+        H = self.direct.assemble(project=True)
+        self.lu = spla.splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
+                            options={"SymmetricMode": True})
+        self.refreshes += 1
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        z = np.zeros_like(r)
+        z[self.direct.free] = self.lu.solve(r[self.direct.free])
+        return z
+
+    def reset(self) -> None:
+        self.lu = None
+
+
 class CGSolver:
-    """Matrix-free block-Jacobi PCG on the Taichi model."""
+    """Matrix-free PCG: Hessian products in Taichi, preconditioned by a reused
+    factorization (``factor``, default) or by 2x2 block Jacobi inside one fused
+    Taichi kernel per iteration (``jacobi``)."""
 
     name = "cg"
 
-    def __init__(self, model: Model, max_iter: int | None = None):
+    def __init__(self, model: Model, max_iter: int | None = None, preconditioner: str = "factor"):
+        if preconditioner not in PRECONDITIONERS:
+            raise InputError(f"unknown preconditioner '{preconditioner}' (choose from "
+                             f"{', '.join(PRECONDITIONERS)})")
         self.model = model
-        self.max_iter = max_iter or max(1000, 4 * model.dofs)
+        self.preconditioner = preconditioner
+        self.pre = FactorPreconditioner(model) if preconditioner == "factor" else None
+        self.max_iter = max_iter or (200 if self.pre else max(1000, 4 * model.dofs))
         self.stats = LinearStats()
         self.last: CGStatus | None = None
+        self._project = False
+
+    def _prepare(self, project: bool) -> None:
+        if self.pre is not None and self.pre.stale:
+            self.pre.refresh()
+        self.model.prepare_hessian(project)
+        self._project = project
+
+    def _run(self, rhs: np.ndarray | None, tol: float, warm: bool) -> CGStatus:
+        m = self.model
+        if self.pre is None:
+            st = m.cg_solve(rhs, tol=tol, max_iter=self.max_iter, warm=warm)
+        else:
+            st = m.pcg_solve(rhs, tol, self.max_iter, self.pre, warm)
+            if not st.converged and not st.negative_curvature:  # too far from the reference
+                self.pre.refresh()
+                m.prepare_hessian(self._project)
+                st = m.pcg_solve(None, tol, self.max_iter, self.pre, False)
+            if st.iterations > self.pre.refresh_iterations:
+                self.pre.reset()
+        self.last = st
+        self.stats.solves += 1
+        self.stats.iterations += st.iterations
+        return st
 
     def newton_direction(self, eta: float, project: bool, fresh: bool = True) -> tuple[float, bool, int]:
         m = self.model
-        m.prepare_hessian(project)
+        self._prepare(project)
         m._newton_rhs()
-        st = m.cg_solve(None, tol=eta, max_iter=self.max_iter)
-        self._count(st)
+        st = self._run(None, eta, warm=False)
         return m._take_direction(), st.negative_curvature, st.iterations
 
     def solve(self, rhs: np.ndarray, tol: float, warm: bool = False,
               prepare: bool = True) -> np.ndarray:
-        m = self.model
         if prepare:
-            m.prepare_hessian(False)
-        st = m.cg_solve(rhs, tol=tol, max_iter=self.max_iter, warm=warm)
-        self._count(st)
+            self._prepare(False)
+        st = self._run(rhs, tol, warm)
         if not st.converged:
             raise ConvergenceError(f"CG did not converge: relative residual {st.residual:.2e} "
                                    f"after {st.iterations} iterations (tolerance {tol:.1e})")
-        return m.cg_solution()
+        return self.model.cg_solution()
 
-    def _count(self, st: CGStatus) -> None:
-        self.last = st
-        self.stats.solves += 1
-        self.stats.iterations += st.iterations
+    def approx_solve(self, rhs: np.ndarray) -> np.ndarray | None:
+        """H^-1 rhs through the preconditioner's factorization (None without one)."""
+        if self.pre is None or self.pre.lu is None:
+            return None
+        return self.pre(np.asarray(rhs, dtype=float).ravel()).reshape(-1, 2)
+
+    def reset(self) -> None:
+        """Forget reused state (a stage start must not depend on earlier stages)."""
+        if self.pre is not None:
+            self.pre.reset()
 
 
 class DirectSolver:
@@ -221,11 +298,18 @@ class DirectSolver:
         self.factor = lu
         return y
 
-    def solve_last(self, rhs: np.ndarray) -> np.ndarray:
-        """Solve with the last factorization (the Hessian it was made from), full (n, 2)."""
+    def approx_solve(self, rhs: np.ndarray) -> np.ndarray | None:
+        """Solve with the last factorization (the Hessian it was made from), full (n, 2);
+        None before the first."""
+        if self.factor is None:
+            return None
         out = np.zeros(2 * self.model.n)
         out[self.free] = self.factor.solve(np.asarray(rhs, dtype=float).ravel()[self.free])
         return out.reshape(-1, 2)
+
+    def reset(self) -> None:
+        """Forget the last factorization."""
+        self.factor = None
 
     def newton_direction(self, eta: float, project: bool, fresh: bool = True) -> tuple[float, bool, int]:
         """With ``fresh=False`` and a factorization at hand (of the exact Hessian at a
@@ -261,10 +345,13 @@ class DirectSolver:
 
 
 def make_linear_solver(name: str, model: Model) -> LinearSolver:
-    """A linear backend by name: ``cg``, ``direct`` or ``auto``."""
+    """A linear backend by name: ``cg`` (factorization-preconditioned), ``cg-jacobi``
+    (block Jacobi, all in Taichi), ``direct`` or ``auto``."""
     name = resolve_solver(name, model.dofs)
     if name == "cg":
         return CGSolver(model)
+    if name == "cg-jacobi":
+        return CGSolver(model, preconditioner="jacobi")
     if name == "direct":
         return DirectSolver(model)
     raise InputError(f"unknown solver '{name}' (choose from {', '.join(SOLVERS)})")

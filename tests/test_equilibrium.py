@@ -58,15 +58,16 @@ def test_cg_and_direct_agree(scene, level):
     m = Model.from_problem(p)
     ac = 0.08 * p.fibers.a0
     xs = {}
-    for solver in ("cg", "direct"):
+    for solver in ("cg", "cg-jacobi", "direct"):
         m.reset()
         eq = NewtonSolver(m, solver).solve(ac=ac)
         assert eq.residual <= 1e-10
         xs[solver] = eq.x
     assert np.abs(xs["cg"] - xs["direct"]).max() <= 1e-8 * p.size
+    assert np.abs(xs["cg-jacobi"] - xs["direct"]).max() <= 1e-8 * p.size
 
 
-@pytest.mark.parametrize("solver", ["cg", "direct"])
+@pytest.mark.parametrize("solver", ["cg", "cg-jacobi", "direct"])
 def test_warm_start_takes_fewer_newton_iterations(solver):
     p = build_problem(load_scene("t_shape"), 1)
     m = Model.from_problem(p)
@@ -81,7 +82,7 @@ def test_warm_start_takes_fewer_newton_iterations(solver):
     assert np.abs(warm.x - cold.x).max() <= 1e-8 * p.size
 
 
-@pytest.mark.parametrize("solver", ["cg", "direct"])
+@pytest.mark.parametrize("solver", ["cg", "cg-jacobi", "direct"])
 def test_newton_from_rest_iteration_count(solver):
     """Exact Hessian first (DESIGN.md section 4): t_shape level 2, uniform 0.05."""
     p = build_problem(load_scene("t_shape"), 2)
@@ -91,15 +92,32 @@ def test_newton_from_rest_iteration_count(solver):
     assert eq.residual <= 1e-10
 
 
-def test_serial_and_parallel_loops_agree():
+@pytest.mark.parametrize("solver", ["cg", "cg-jacobi", "direct"])
+def test_serial_and_parallel_loops_agree(solver):
     p = build_problem(load_scene("gripper"), 1)
     ac = 0.06 * p.fibers.a0
     xs = []
     for parallel in (False, True):
         m = Model.from_problem(p, parallel=parallel)
         assert m.parallel == parallel
-        xs.append(NewtonSolver(m, "cg").solve(ac=ac).x)
+        xs.append(NewtonSolver(m, solver).solve(ac=ac).x)
     assert np.abs(xs[0] - xs[1]).max() <= 1e-9 * p.size
+
+
+def test_preconditioners_agree_and_factor_needs_few_iterations():
+    """The reused-factorization PCG and block-Jacobi PCG give the same equilibrium; a
+    solve at a nearby design needs few factorization-preconditioned iterations."""
+    p = build_problem(load_scene("t_shape"), 2)
+    m = Model.from_problem(p)
+    rng = np.random.default_rng(1)
+    ac = rng.uniform(0.02, 0.08, p.fibers.n_fibers) * p.fibers.a0
+    fac, jac = NewtonSolver(m, "cg"), NewtonSolver(m, "cg-jacobi")
+    x_f = fac.solve(ac=ac, x0=p.mesh.nodes).x
+    x_j = jac.solve(ac=ac, x0=p.mesh.nodes).x
+    assert np.abs(x_f - x_j).max() <= 1e-8 * p.size
+    warm = fac.solve(ac=ac * (1 + 0.005 * rng.uniform(-1, 1, len(ac))))
+    assert warm.linear_iterations <= 15 * warm.newton_iterations
+    assert fac.linear.pre.refreshes >= 1
 
 
 def test_solves_are_deterministic():

@@ -18,7 +18,7 @@ def t_shape_1():
     return build_problem(load_scene("t_shape"), 1)
 
 
-@pytest.mark.parametrize("solver", ["cg", "direct"])
+@pytest.mark.parametrize("solver", ["cg", "cg-jacobi", "direct"])
 @pytest.mark.parametrize("terms", [[t] for t in TERMS] + [TERMS], ids=lambda t: "+".join(t))
 def test_adjoint_gradient_matches_finite_differences(t_shape_1, solver, terms):
     p = t_shape_1
