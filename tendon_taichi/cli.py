@@ -358,6 +358,28 @@ def cmd_compare(args) -> int:
     return _extraction_output(args, ex)
 
 
+# ------------------------------------------------------------------ bench
+def cmd_bench(args) -> int:
+    from .bench import run_bench, table
+    from .scene import load_scene
+
+    scene = load_scene(args.scene)
+    if args.repeat < 1 or any(lv < 1 for lv in args.levels):
+        raise InputError("--repeat and --levels must be >= 1")
+    optimize_levels = [] if args.no_optimize else args.optimize_levels
+    result = run_bench(scene, args.levels, args.solver, args.repeat, args.out, optimize_levels,
+                       args.forward_max_fibers)
+    _json_out(args, result)
+    if args.json != "-":
+        print("\n".join(table(result)))
+        ex = result["exponents"]
+        for s, d in sorted(ex.items()):
+            print(f"exponents {s}: " + ", ".join(f"{k[:-2]} {v:.2f}" for k, v in d.items()))
+        print(f"compile {result['compile_s']:.1f} s; machine: {result['machine']['cores']} cores, "
+              f"{result['machine']['cpu']}; outputs in {args.out}/ (bench.json, bench.csv, bench.png)")
+    return 0
+
+
 # ------------------------------------------------------------------ main
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description="Design the tendon layout of a 2D soft robot.")
@@ -439,6 +461,20 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--no-record", action="store_true", help="do not log the tendons into the recording")
         _add_json(s)
         s.set_defaults(func=cmd_extract if name == "extract" else cmd_compare)
+
+    s = sub.add_parser("bench", help="headless resolution-scaling benchmark (JSON, CSV, PNG)")
+    s.add_argument("scene", metavar="SCENE", nargs="?", default="t_shape", help="default t_shape")
+    s.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3], metavar="N")
+    s.add_argument("--solver", nargs="+", choices=SOLVER_CHOICES, default=["cg", "direct"])
+    s.add_argument("--repeat", type=int, default=3, metavar="N", help="runs per timing (default 3)")
+    s.add_argument("--out", default="recordings/bench", metavar="DIR")
+    s.add_argument("--optimize-levels", type=int, nargs="+", default=None, metavar="N",
+                   help="levels at which to run the whole optimization (default: all)")
+    s.add_argument("--no-optimize", action="store_true", help="skip the whole optimizations")
+    s.add_argument("--forward-max-fibers", type=int, default=2500, metavar="N",
+                   help="time forward sensitivities only up to this many fibers (one solve each)")
+    _add_json(s)
+    s.set_defaults(func=cmd_bench)
     return p
 
 

@@ -101,3 +101,64 @@ def plot_compare(path: str | Path, extraction) -> Path:
         fig.savefig(tmp, dpi=130, format="png")
     plt.close(fig)
     return Path(path)
+
+
+def plot_bench(path: str | Path, result: dict) -> Path:
+    """Two panels: time against DOFs (log-log) per operation and solver, with the
+    fitted exponent in the legend; quality (active length, tendons, realizable pose
+    error) against the level."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .bench import TIMINGS
+    from .export import atomic_path
+
+    rows = result["levels"]
+    fig, (ax, aq) = plt.subplots(1, 2, figsize=(13, 5))
+    markers = dict(zip(TIMINGS, "osD^v*"))
+    styles = ["-", "--", ":", "-."]
+    solvers = sorted({s for r in rows for s in r["solvers"]})
+    for si, s in enumerate(solvers):
+        for key in TIMINGS:
+            pts = [(r["dofs"], r["solvers"][s][key]["median"]) for r in rows
+                   if s in r["solvers"] and r["solvers"][s].get(key)]
+            if not pts:
+                continue
+            k = result["exponents"].get(s, {}).get(key)
+            label = f"{s}: {key[:-2]}" + (f" (~DOFs^{k:.2f})" if k is not None else "")
+            ax.loglog(*zip(*pts), styles[si % len(styles)], marker=markers[key], label=label)
+    ax.set_xlabel("free DOFs")
+    ax.set_ylabel("seconds (median)")
+    ax.set_title(f"{result['scene']}: cost against resolution", fontsize=10)
+    ax.legend(fontsize=6.5, ncol=2)
+    ax.grid(True, which="both", alpha=0.3)
+    levels = [r["level"] for r in rows]
+    for si, s in enumerate(solvers):
+        q = [r["solvers"].get(s, {}) for r in rows]
+        if not any("active_length" in f for f in q):
+            continue
+        aq.plot(levels, [100 * f.get("active_length", np.nan) for f in q], "o" + styles[si % 4],
+                label=f"{s}: active length (cm)")
+        aq.plot(levels, [100 * f.get("pose_error_rel", np.nan) for f in q], "s" + styles[si % 4],
+                label=f"{s}: idealized pose error (% of L)")
+        names = sorted({n for f in q for n in f.get("extractors", {})})
+        for n in names:
+            ext = [f.get("extractors", {}).get(n, {}) for f in q]
+            aq.plot(levels, [e.get("tendons", np.nan) for e in ext], "^" + styles[si % 4],
+                    label=f"{s}/{n}: tendons")
+            aq.plot(levels, [100 * e.get("realizable_pose_error_rel", np.nan) for e in ext], "v" + styles[si % 4],
+                    label=f"{s}/{n}: realizable pose error (% of L)")
+    aq.set_xlabel("resolution level")
+    aq.set_xticks(levels)
+    aq.set_title("quality against resolution", fontsize=10)
+    if aq.get_legend_handles_labels()[0]:
+        aq.legend(fontsize=6.5)
+    else:
+        aq.text(0.5, 0.5, "no optimization run (--no-optimize)", ha="center", transform=aq.transAxes)
+    aq.grid(True, alpha=0.3)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+    return Path(path)

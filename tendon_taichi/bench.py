@@ -1,0 +1,260 @@
+"""The headless resolution-scaling benchmark (``tendon-taichi bench``).
+
+Per resolution level and linear solver it measures (medians, and min/max over
+``repeat`` runs, after a warm-up so that compiling the Taichi kernels is
+excluded and reported separately as ``compile_s``): problem sizes; one
+equilibrium from rest and one warm-started from a nearby design (contraction
+ratios moved by +-0.5 %); Newton and CG iterations; one adjoint solve; one full
+gradient (warm equilibrium + adjoint); the gradient by forward sensitivities
+(one solve per fiber, the method of Bern et al. 2017) where that finishes in
+reasonable time; the process's peak memory; and the whole regularized
+optimization with the quality of each installed extractor's tendons.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import platform
+import resource
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import runtime
+from .optimizer import ADJOINT_TOL, SoftIK
+from .problem import build_problem
+from .scene import Scene
+from .solvers import DirectSolver, NewtonSolver
+
+#: seconds-valued figures, in the order of the table and the plot
+TIMINGS = ("equilibrium_cold_s", "equilibrium_warm_s", "adjoint_s", "gradient_s", "forward_sensitivity_s",
+           "optimize_s")
+
+
+def machine() -> dict:
+    model = platform.processor() or ""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            model = next((ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), model)
+    except OSError:
+        pass
+    return {"cores": os.cpu_count(), "cpu": model, "python": platform.python_version(),
+            "platform": platform.platform(), **runtime.info()}
+
+
+def peak_memory_mb() -> float:
+    """Peak resident memory of this process so far, MB."""
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return rss / 1024.0 if sys.platform != "darwin" else rss / 2 ** 20
+
+
+def _stats(values: list[float]) -> dict:
+    return {"median": statistics.median(values), "min": min(values), "max": max(values)}
+
+
+def _designs(problem, seed: int = 0):
+    """A design (contraction ratios 2-8 %) and a nearby one (+-0.5 %)."""
+    rng = np.random.default_rng(seed)
+    r0 = rng.uniform(0.02, 0.08, problem.fibers.n_fibers)
+    return r0, r0 * (1 + 0.005 * rng.uniform(-1, 1, len(r0)))
+
+
+def measure_solver(problem, solver: str, repeat: int, forward_max_fibers: int, progress) -> dict:
+    """Equilibria, adjoint, gradient and forward sensitivities with one backend."""
+    a0 = problem.fibers.a0
+    r0, r1 = _designs(problem)
+    ik = SoftIK(problem, problem.scene.optimize, solver)
+    ik.configure(None)  # pose + contraction: what soft IK differentiates
+    m, newton, lin = ik.model, ik.newton, ik.linear
+    exact = NewtonSolver(m, lin)  # plain exact Newton, as `simulate` solves
+    t = time.perf_counter()
+    exact.solve(ac=r0 * a0, x0=problem.mesh.nodes)  # warm-up: compiles what this backend needs
+    out = {"solver": lin.name, "first_solve_s": time.perf_counter() - t}
+    cold, warm, nit, cgit = [], [], {}, {}
+    for _ in range(repeat):
+        lin.reset()
+        it0 = lin.stats.iterations
+        t = time.perf_counter()
+        eq = exact.solve(ac=r0 * a0, x0=problem.mesh.nodes)
+        cold.append(time.perf_counter() - t)
+        nit["cold"], cgit["cold"] = eq.newton_iterations, lin.stats.iterations - it0
+        x_eq = eq.x
+        it0 = lin.stats.iterations
+        t = time.perf_counter()
+        eq = exact.solve(ac=r1 * a0)  # warm: from the equilibrium of the nearby design
+        warm.append(time.perf_counter() - t)
+        nit["warm"], cgit["warm"] = eq.newton_iterations, lin.stats.iterations - it0
+        m.set_positions(x_eq)
+    out["equilibrium_cold_s"], out["equilibrium_warm_s"] = _stats(cold), _stats(warm)
+    out["newton_iterations"], out["cg_iterations"] = nit, cgit
+    progress(f"  {lin.name}: equilibrium cold {statistics.median(cold):.3f} s, warm {statistics.median(warm):.3f} s")
+
+    # the adjoint solve and one full gradient, at the design r0
+    exact.solve(ac=r0 * a0, x0=problem.mesh.nodes)
+    ik.evaluate(r0)
+    rhs = ik.objective.evaluate(_state(ik, r0)).dx
+    rhs[problem.fixed] = 0.0
+    adj, grad = [], []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        lin.solve(rhs, tol=ADJOINT_TOL)
+        adj.append(time.perf_counter() - t)
+    for _ in range(repeat):
+        ik.restart(r0)
+        ik.evaluate(r0)
+        t = time.perf_counter()
+        _, g = ik.evaluate(r1)
+        grad.append(time.perf_counter() - t)
+    out["adjoint_s"], out["gradient_s"] = _stats(adj), _stats(grad)
+    progress(f"  {lin.name}: adjoint {statistics.median(adj):.4f} s, gradient {statistics.median(grad):.4f} s")
+
+    # forward sensitivities: one solve per fiber for dx/dac (Bern et al. 2017)
+    out["forward_sensitivity_s"] = None
+    if problem.fibers.n_fibers <= forward_max_fibers:
+        t = time.perf_counter()
+        g_fwd = forward_gradient(ik, r1)
+        dt = time.perf_counter() - t
+        out["forward_sensitivity_s"] = {"median": dt, "min": dt, "max": dt}
+        out["forward_vs_adjoint_rel_diff"] = float(np.linalg.norm(g_fwd - g) / np.linalg.norm(g))
+        progress(f"  {lin.name}: forward sensitivities {dt:.2f} s ({problem.fibers.n_fibers} solves)")
+    return out
+
+
+def _state(ik: SoftIK, r: np.ndarray):
+    from .objectives import State
+    x, tau = ik.state()
+    return State(x, r * ik.a0, tau)
+
+
+def forward_gradient(ik: SoftIK, r: np.ndarray) -> np.ndarray:
+    """dO/dr by forward sensitivities at the equilibrium of r: for each fiber i,
+    H s_i = -(d2E/dx dac) e_i, then dO/dac_i = explicit_i + dO/dx . s_i."""
+    ik.evaluate(r)
+    m, lin = ik.model, ik.linear
+    cab = m.cable_state()
+    ev = ik.objective.evaluate(_state(ik, r))
+    dOdx = ev.dx + m.length_jacobian_product(ev.dtau * cab["kc"])
+    dOdx[ik.problem.fixed] = 0.0
+    n_f = len(r)
+    grad = ev.dac + ev.dtau * cab["tau_ac"]
+    lin.solve(dOdx, tol=ADJOINT_TOL)  # prepares (direct: factorizes) the Hessian once
+    direct = isinstance(lin, DirectSolver)
+    for i in range(n_f):
+        e = np.zeros(n_f)
+        e[i] = 1.0
+        rhs = -m.mixed_product(e)
+        s = lin.approx_solve(rhs) if direct else lin.solve(rhs, tol=ADJOINT_TOL, prepare=False)
+        grad[i] += float((dOdx * s).sum())
+    return grad * ik.a0
+
+
+def measure_optimize(scene: Scene, level: int, solver: str, out_dir: Path, progress) -> dict:
+    """The whole regularized optimization, then every installed extractor on its last stage."""
+    from .runs import optimize
+    from .tendons import extract
+
+    rec = out_dir / f"{scene.name}-r{level}-{solver}.rrd"
+    t = time.perf_counter()
+    run = optimize(scene, level, solver, record=rec)
+    dt = time.perf_counter() - t
+    final = run.summary["final"]
+    res = {"optimize_s": {"median": dt, "min": dt, "max": dt}, "stages": len(run.stages),
+           "pose_error_rel": final["pose_error_rel"], "active_fibers": final["active_fibers"],
+           "active_length": final["active_length"], "evaluations": run.summary.get("evaluations")}
+    progress(f"  {solver}: optimize {dt:.1f} s, {len(run.stages)} stages, pose {100 * final['pose_error_rel']:.2f} %, "
+             f"active {100 * final['active_length']:.1f} cm")
+    ex = extract(rec, record=False)
+    res["extractors"] = {r.name: ({"error": r.error} if r.error else
+                                  {"tendons": r.metrics["count"], "kinks": r.metrics["kinks"],
+                                   "realizable_pose_error_rel": r.metrics["realizable_pose_error_rel"]})
+                         for r in ex.results}
+    return res
+
+
+def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int = 3,
+              out_dir: str | Path = "recordings/bench", optimize_levels: list[int] | None = None,
+              forward_max_fibers: int = 2500, progress=None) -> dict:
+    """Run the benchmark and write bench.json, bench.csv and bench.png into ``out_dir``."""
+    progress = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    optimize_levels = levels if optimize_levels is None else optimize_levels
+    rows = []
+    for level in levels:
+        p = build_problem(scene, level)
+        entry = {"level": level, **p.counts(), "solvers": {}}
+        progress(f"level {level}: {entry['nodes']} nodes, {entry['triangles']} triangles, {entry['fibers']} fibers, "
+                 f"{entry['dofs']} DOFs")
+        for solver in solvers:
+            fig = measure_solver(p, solver, repeat, forward_max_fibers, progress)
+            if level in optimize_levels:
+                fig.update(measure_optimize(scene, level, solver, out_dir, progress))
+            fig["peak_memory_mb"] = peak_memory_mb()
+            entry["solvers"][fig.pop("solver") if solver == "auto" else solver] = fig
+        rows.append(entry)
+    # each backend's first solve in the process included compiling its kernels
+    comp = sum(f["first_solve_s"] - f["equilibrium_cold_s"]["median"] for f in rows[0]["solvers"].values())
+    result = {"scene": scene.name, "machine": machine(), "compile_s": comp, "repeat": repeat, "levels": rows,
+              "exponents": exponents(rows)}
+    write_outputs(result, out_dir)
+    return result
+
+
+def exponents(rows: list[dict]) -> dict:
+    """Least-squares slopes of log(time) against log(DOFs), per solver and timing,
+    over the levels from the second on when there are three or more (the first is
+    dominated by fixed costs)."""
+    out = {}
+    solvers = {s for r in rows for s in r["solvers"]}
+    fit_rows = rows[1:] if len(rows) >= 3 else rows
+    for s in solvers:
+        for key in TIMINGS:
+            pts = [(r["dofs"], r["solvers"][s][key]["median"]) for r in fit_rows
+                   if s in r["solvers"] and r["solvers"][s].get(key)]
+            if len(pts) >= 2:
+                x, y = np.log([p[0] for p in pts]), np.log([p[1] for p in pts])
+                out.setdefault(s, {})[key] = float(np.polyfit(x, y, 1)[0])
+    return out
+
+
+def write_outputs(result: dict, out_dir: Path) -> None:
+    from .export import atomic_path, write_json
+    from .plots import plot_bench
+
+    write_json(result, out_dir / "bench.json")
+    with atomic_path(out_dir / "bench.csv") as tmp:
+        with open(tmp, "w", newline="") as fh:
+            w = csv.writer(fh)
+            head = ["level", "nodes", "triangles", "fibers", "dofs", "solver"] + list(TIMINGS) + \
+                   ["newton_cold", "newton_warm", "cg_cold", "cg_warm", "peak_memory_mb", "stages",
+                    "pose_error_rel", "active_length", "active_fibers"]
+            w.writerow(head)
+            for r in result["levels"]:
+                for s, f in r["solvers"].items():
+                    w.writerow([r["level"], r["nodes"], r["triangles"], r["fibers"], r["dofs"], s]
+                               + [f[k]["median"] if f.get(k) else "" for k in TIMINGS]
+                               + [f["newton_iterations"]["cold"], f["newton_iterations"]["warm"],
+                                  f["cg_iterations"]["cold"], f["cg_iterations"]["warm"], f["peak_memory_mb"],
+                                  f.get("stages", ""), f.get("pose_error_rel", ""), f.get("active_length", ""),
+                                  f.get("active_fibers", "")])
+    plot_bench(out_dir / "bench.png", result)
+
+
+def table(result: dict) -> list[str]:
+    """The human-readable table of a bench result."""
+    rows = [f"{'level':>5} {'DOFs':>6} {'fibers':>6} {'solver':>9} {'eq cold':>8} {'eq warm':>8} {'Newton':>7} "
+            f"{'CG it':>9} {'adjoint':>8} {'gradient':>8} {'forward':>8} {'optimize':>8} {'mem MB':>7}"]
+    fmt = lambda v: f"{v['median']:.3f}" if v else "-"  # noqa: E731
+    for r in result["levels"]:
+        for s, f in r["solvers"].items():
+            rows.append(f"{r['level']:>5} {r['dofs']:>6} {r['fibers']:>6} {s:>9} {fmt(f['equilibrium_cold_s']):>8} "
+                        f"{fmt(f['equilibrium_warm_s']):>8} "
+                        f"{f['newton_iterations']['cold']:>3}/{f['newton_iterations']['warm']:<3} "
+                        f"{f['cg_iterations']['cold']:>4}/{f['cg_iterations']['warm']:<4} {fmt(f['adjoint_s']):>8} "
+                        f"{fmt(f['gradient_s']):>8} {fmt(f.get('forward_sensitivity_s')):>8} "
+                        f"{fmt(f.get('optimize_s')):>8} {f['peak_memory_mb']:>7.0f}")
+    return rows

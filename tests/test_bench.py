@@ -1,0 +1,56 @@
+"""The benchmark runs headless and writes its JSON, CSV and PNG (timings are not
+asserted: machines are noisy; the figures that do not depend on speed are)."""
+
+import csv
+import json
+
+import numpy as np
+
+SMALL = """
+name = "small_finger"
+[body]
+outline = [[0.0, 0.0], [0.06, 0.0], [0.06, 0.015], [0.0, 0.015]]
+max_triangle_area = 1.6e-5
+[fibers]
+spacing = 0.005
+[[fixed]]
+box = [[-0.0005, -0.0005], [0.0005, 0.0155]]
+[[targets]]
+point = [0.06, 0.0075]
+goal = [0.058, 0.015]
+[optimize]
+stage_iterations = 8
+homotopy = { k0 = 1.0, factor = 0.5, k_min = 0.3 }
+"""
+
+
+def test_bench_writes_its_outputs(tmp_path, cli):
+    (tmp_path / "small.toml").write_text(SMALL)
+    out = tmp_path / "bench"
+    r = cli("bench", tmp_path / "small.toml", "--levels", 1, 2, "--solver", "cg", "direct", "--repeat", 1,
+            "--optimize-levels", 1, "--out", out, "--json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    assert [lv["level"] for lv in res["levels"]] == [1, 2] and res["machine"]["cores"] >= 1
+    assert res["compile_s"] > 0
+    for lv in res["levels"]:
+        for key in ("nodes", "triangles", "fibers", "dofs"):
+            assert lv[key] > 0
+        assert set(lv["solvers"]) == {"cg", "direct"}
+        for s, f in lv["solvers"].items():
+            for key in ("equilibrium_cold_s", "equilibrium_warm_s", "adjoint_s", "gradient_s",
+                        "forward_sensitivity_s"):
+                assert 0 < f[key]["min"] <= f[key]["median"] <= f[key]["max"]
+            assert f["newton_iterations"]["warm"] < f["newton_iterations"]["cold"]
+            assert f["forward_vs_adjoint_rel_diff"] < 1e-6  # both give the same gradient
+            assert f["peak_memory_mb"] > 0
+    one = res["levels"][0]["solvers"]
+    for s in ("cg", "direct"):
+        assert one[s]["stages"] == 3 and one[s]["optimize_s"]["median"] > 0
+        assert set(one[s]["extractors"]) >= {"strands", "path_cover", "network_discovery"}
+    assert "optimize_s" not in res["levels"][1]["solvers"]["cg"]
+    rows = list(csv.DictReader(open(out / "bench.csv")))
+    assert len(rows) == 4 and {r["solver"] for r in rows} == {"cg", "direct"}
+    assert (out / "bench.png").stat().st_size > 10000
+    for s in ("cg", "direct"):
+        assert np.isfinite(res["exponents"][s]["equilibrium_cold_s"])
