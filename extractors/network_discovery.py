@@ -36,14 +36,9 @@ class NetworkDiscoveryExtractor(Extractor):
             if used[seed]:
                 continue
             used[seed] = True
-            a, b = (int(v) for v in view.edges[seed])
-            visited = {a, b}
-            back = self._grow(view, tau, b, used, visited)
-            front = self._grow(view, tau, a, used, visited)
-            start = a
-            for f in front:
-                start = view.other(f, start)
-            tendons.append(view.tendon(start, front[::-1] + [seed] + back, state))
+            visited = {int(v) for v in view.edges[seed]}
+            start, fibers = view.grow(seed, lambda v, f: self._grow(view, tau, v, used, visited))
+            tendons.append(view.tendon(start, fibers, state))
         return prune(tendons, options)
 
     @staticmethod

@@ -40,15 +40,10 @@ class StrandsExtractor(Extractor):
             if used[seed]:
                 continue
             used[seed] = True
-            a, b = (int(v) for v in view.edges[seed])
-            visited = {a, b}
+            visited = {int(v) for v in view.edges[seed]}
             tensions = [tau[seed]]
-            back = self._grow(view, state, options, b, seed, used, visited, tensions)
-            front = self._grow(view, state, options, a, seed, used, visited, tensions)
-            fibers = front[::-1] + [seed] + back
-            start = a
-            for f in front:  # walk the front extension out to its far end
-                start = view.other(f, start)
+            start, fibers = view.grow(seed, lambda v, f: self._grow(view, state, options, v, f, used,
+                                                                     visited, tensions))
             tendons.append(view.tendon(start, fibers, state))
         return prune(tendons, options)
 

@@ -141,6 +141,18 @@ class FiberView:
         """Rest distance from fiber node v to the nearest clamped mesh node, m."""
         return float(self._to_clamp[v])
 
+    def grow(self, seed: int, extend) -> tuple[int, list[int]]:
+        """A path grown from fiber ``seed`` at both ends: ``extend(node, fiber)``
+        returns, in order, the fibers to add beyond ``node`` (which the path reached
+        along ``fiber``). Returns the path's start node and its fibers in order."""
+        a, b = (int(v) for v in self.edges[seed])
+        back = extend(b, seed)
+        front = extend(a, seed)
+        start = a
+        for f in front:  # walk the front extension out to its far end
+            start = self.other(f, start)
+        return start, front[::-1] + [seed] + back
+
     def tendon(self, start: int, fibers: list[int], state: IdealizedState) -> Tendon:
         """The tendon following ``fibers`` from node ``start``, oriented so that its
         pull end is the end nearer to the clamped region (where motors sit)."""

@@ -236,6 +236,18 @@ def _sum(F: ti.template(), I: ti.template(), slot, count, out, serial: ti.templa
 
 
 @ti.func
+def _cable_sum(F: ti.template(), I: ti.template(), slot, c) -> ti.f64:
+    """The sum of a per-segment value over the segments of cable c."""
+    total = 0.0
+    if I[_SINGLE] != 0:
+        total = _f(F, I, slot, c)
+    else:
+        for s in range(I[I[_CAB_START] + c], I[I[_CAB_START] + c + 1]):
+            total += _f(F, I, slot, s)
+    return total
+
+
+@ti.func
 def _update_cables(F: ti.template(), I: ti.template(), xslot, serial: ti.template()):
     """Segment geometry, cable lengths, tensions, stiffnesses and energies at ``xslot``."""
     ti.loop_config(serialize=serial)
@@ -251,12 +263,7 @@ def _update_cables(F: ti.template(), I: ti.template(), xslot, serial: ti.templat
     eps = _sc(F, I, _EPS)
     ti.loop_config(serialize=serial)
     for c in range(I[_C]):
-        L = 0.0
-        if I[_SINGLE] != 0:
-            L = _f(F, I, _SEG_L, c)
-        else:
-            for s in range(I[I[_CAB_START] + c], I[I[_CAB_START] + c + 1]):
-                L += _f(F, I, _SEG_L, s)
+        L = _cable_sum(F, I, _SEG_L, c)
         a = _f(F, I, _A0, c) - _f(F, I, _AC, c)
         e = L / a - 1.0
         EA = _f(F, I, _EA, c)
@@ -398,13 +405,7 @@ def _segment_directional(F: ti.template(), I: ti.template(), src, serial: ti.tem
         _set_f(F, I, _SEG_W, s, _v(F, I, _SEG_N, s).dot(dd))
     ti.loop_config(serialize=serial)
     for c in range(I[_C]):
-        w = 0.0
-        if I[_SINGLE] != 0:
-            w = _f(F, I, _SEG_W, c)
-        else:
-            for s in range(I[I[_CAB_START] + c], I[I[_CAB_START] + c + 1]):
-                w += _f(F, I, _SEG_W, s)
-        _set_f(F, I, _CW, c, w)
+        _set_f(F, I, _CW, c, _cable_sum(F, I, _SEG_W, c))
 
 
 @ti.func
