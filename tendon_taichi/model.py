@@ -195,6 +195,13 @@ def _point(F: ti.template(), I: ti.template(), xslot, p) -> vec2:
 
 
 @ti.func
+def _segment_vector(F: ti.template(), I: ti.template(), xslot, s) -> vec2:
+    """End minus start of segment s for the node vectors at ``xslot``."""
+    os = I[_SEG] + 3 * s
+    return _point(F, I, xslot, I[os + 1]) - _point(F, I, xslot, I[os])
+
+
+@ti.func
 def _reduce(F: ti.template(), I: ti.template(), count, term: ti.template(), a, b, out,
             serial: ti.template()):
     """scalars[out] = sum of term(F, I, a, b, i) for i in [0, count): fixed blocks summed
@@ -252,8 +259,7 @@ def _update_cables(F: ti.template(), I: ti.template(), xslot, serial: ti.templat
     """Segment geometry, cable lengths, tensions, stiffnesses and energies at ``xslot``."""
     ti.loop_config(serialize=serial)
     for s in range(I[_S]):
-        os = I[_SEG] + 3 * s
-        d = _point(F, I, xslot, I[os + 1]) - _point(F, I, xslot, I[os])
+        d = _segment_vector(F, I, xslot, s)
         l = d.norm()
         _set_f(F, I, _SEG_L, s, l)
         nv = vec2(0.0, 0.0)
@@ -399,8 +405,7 @@ def _segment_directional(F: ti.template(), I: ti.template(), src, serial: ti.tem
     """SEG_DD = change of each segment vector along src; CW = dL_c/dx . src."""
     ti.loop_config(serialize=serial)
     for s in range(I[_S]):
-        os = I[_SEG] + 3 * s
-        dd = _point(F, I, src, I[os + 1]) - _point(F, I, src, I[os])
+        dd = _segment_vector(F, I, src, s)
         _set_v(F, I, _SEG_DD, s, dd)
         _set_f(F, I, _SEG_W, s, _v(F, I, _SEG_N, s).dot(dd))
     ti.loop_config(serialize=serial)
