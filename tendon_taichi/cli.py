@@ -368,7 +368,7 @@ def cmd_bench(args) -> int:
         raise InputError("--repeat and --levels must be >= 1")
     optimize_levels = [] if args.no_optimize else args.optimize_levels
     result = run_bench(scene, args.levels, args.solver, args.repeat, args.out, optimize_levels,
-                       args.forward_max_fibers)
+                       args.forward_max_fibers, optimize_solver=args.optimize_solver)
     _json_out(args, result)
     if args.json != "-":
         print("\n".join(table(result)))
@@ -471,6 +471,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--optimize-levels", type=int, nargs="+", default=None, metavar="N",
                    help="levels at which to run the whole optimization (default: all)")
     s.add_argument("--no-optimize", action="store_true", help="skip the whole optimizations")
+    s.add_argument("--optimize-solver", choices=("each", "auto"), default="each",
+                   help="run the whole optimization with each solver (default), or once per level "
+                        "with the one --solver auto picks there")
     s.add_argument("--forward-max-fibers", type=int, default=2500, metavar="N",
                    help="time forward sensitivities only up to this many fibers (one solve each)")
     _add_json(s)

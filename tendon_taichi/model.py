@@ -518,14 +518,72 @@ def _k_energy(F: F64, I: I32, xslot: ti.i32, serial: ti.template()) -> vec2:
 
 
 @ti.kernel
-def _k_gradient(F: F64, I: I32, serial: ti.template()) -> ti.f64:
+def _k_gradient(F: F64, I: I32, g_out: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                serial: ti.template()) -> ti.f64:
+    """G = dE_tot/dx (also copied to g_out as 2n values); returns |G_free|^2."""
     _gradient(F, I, serial)
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        g = _v(F, I, _G, i)
+        g_out[2 * i], g_out[2 * i + 1] = g[0], g[1]
     return _sc(F, I, _S0)
 
 
 @ti.kernel
 def _k_hessian(F: F64, I: I32, project: ti.i32, serial: ti.template()):
     _hessian(F, I, project, serial)
+
+
+@ti.func
+def _shape_gradient(B: mat2, a) -> vec2:
+    """grad N_a of corner a from D_m^-1 (rows: corners 1 and 2)."""
+    g = -vec2(B[0, 0] + B[1, 0], B[0, 1] + B[1, 1])
+    if a == 1:
+        g = vec2(B[0, 0], B[0, 1])
+    elif a == 2:
+        g = vec2(B[1, 0], B[1, 1])
+    return g
+
+
+@ti.kernel
+def _k_hessian_entries(F: F64, I: I32, out: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                       serial: ti.template()):
+    """The Hessian's element blocks (36 per element, (6, 6) row-major over the
+    corners' x, y) and segment blocks (144 per segment, over the 6 nodes of its
+    two points), as last prepared; single-segment cables include their axial
+    term kc dL/dx dL/dx^T. For the direct backend's assembly."""
+    ti.loop_config(serialize=serial)
+    for e in range(I[_M]):
+        B = _m2(F, I, _BM, e)
+        D = _m4(F, I, _D, e)
+        vol = _f(F, I, _VOL, e)
+        for a, b in ti.static(ti.ndrange(3, 3)):
+            ga, gb = _shape_gradient(B, a), _shape_gradient(B, b)
+            for k, l in ti.static(ti.ndrange(2, 2)):
+                h = 0.0
+                for j, m in ti.static(ti.ndrange(2, 2)):
+                    h += ga[j] * D[2 * k + j, 2 * l + m] * gb[m]
+                out[36 * e + 6 * (2 * a + k) + 2 * b + l] = vol * h
+    base = 36 * I[_M]
+    ti.loop_config(serialize=serial)
+    for s in range(I[_S]):
+        os = I[_SEG] + 3 * s
+        c = I[os + 2]
+        coef = ti.Vector([0.0] * 6, dt=ti.f64)
+        for k in ti.static(range(3)):
+            coef[k] = -F[I[_PT_BARY] + 3 * I[os] + k]
+            coef[3 + k] = F[I[_PT_BARY] + 3 * I[os + 1] + k]
+        nv = _v(F, I, _SEG_N, s)
+        l = _f(F, I, _SEG_L, s)
+        K = mat2(0.0)
+        if l > 0.0:
+            K = _f(F, I, _TAU, c) / l * (ti.Matrix.identity(ti.f64, 2) - nv.outer_product(nv))
+        if I[_SINGLE] != 0:
+            K += _f(F, I, _KC, c) * nv.outer_product(nv)
+        for a, b in ti.ndrange(6, 6):
+            cab = coef[a] * coef[b]
+            for i, j in ti.static(ti.ndrange(2, 2)):
+                out[base + 144 * s + 12 * (2 * a + i) + 2 * b + j] = cab * K[i, j]
 
 
 @ti.kernel
@@ -651,11 +709,23 @@ def _k_take_direction(F: F64, I: I32, from_cg: ti.i32, serial: ti.template()) ->
 
 
 @ti.kernel
-def _k_trial(F: F64, I: I32, alpha: ti.f64, serial: ti.template()):
-    """XT = X + alpha DX."""
+def _k_direction_from(F: F64, I: I32, d_in: NDARRAY, serial: ti.template()) -> ti.f64:
+    """DX = d (2n values from the host) on the free DOFs; return G . DX."""
+    ti.loop_config(serialize=serial)
+    for i in range(I[_N]):
+        _set_v(F, I, _DX, i, vec2(d_in[2 * i], d_in[2 * i + 1]) * _v(F, I, _MASK, i))
+    _dot(F, I, _G, _DX, _S0, serial)
+    return _sc(F, I, _S0)
+
+
+@ti.kernel
+def _k_trial(F: F64, I: I32, alpha: ti.f64, serial: ti.template()) -> vec2:
+    """XT = X + alpha DX; returns (E_tot, min det F) at XT."""
     ti.loop_config(serialize=serial)
     for i in range(I[_N]):
         _set_v(F, I, _XT, i, _v(F, I, _X, i) + alpha * _v(F, I, _DX, i))
+    _energy(F, I, _XT, serial)
+    return vec2(_sc(F, I, _S0), _sc(F, I, _JMIN))
 
 
 @ti.kernel
@@ -699,12 +769,14 @@ def _k_read_int(I: I32, start: ti.i32) -> ti.i32:
 @dataclass(frozen=True)
 class CGStatus:
     """Result of one PCG solve: ``iterations``, ``converged``, ``negative_curvature``
-    (met p.Hp <= 0 and stopped), and the final relative residual ``residual``."""
+    (met p.Hp <= 0 and stopped), the final relative residual ``residual``, and
+    ``indefinite_preconditioner`` (met r.M^-1 r <= 0 and stopped)."""
 
     iterations: int
     converged: bool
     negative_curvature: bool
     residual: float
+    indefinite_preconditioner: bool = False
 
 
 def _csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -817,6 +889,7 @@ class Model:
         self.F = ti.ndarray(ti.f64, len(fh))
         self.I = ti.ndarray(ti.i32, len(ih))
         self.F.from_numpy(fh)
+        self.g_host = np.zeros(2 * self.n)  # the last gradient, as the host sees it
         self.I.from_numpy(ih.astype(np.int32))
 
     def _read(self, name: str, count: int, at: int = 0) -> np.ndarray:
@@ -855,7 +928,8 @@ class Model:
         return float(E), float(jmin)
 
     def _gradient_norm2(self) -> float:
-        return float(_k_gradient(self.F, self.I, self.serial))
+        """Computes G (also kept on the host, :attr:`g_host`, (2n,)); returns |G_free|^2."""
+        return float(_k_gradient(self.F, self.I, self.g_host, self.serial))
 
     def _newton_rhs(self) -> None:
         _k_newton_rhs(self.F, self.I, self.serial)
@@ -863,8 +937,15 @@ class Model:
     def _take_direction(self, from_cg: bool = True) -> float:
         return float(_k_take_direction(self.F, self.I, 1 if from_cg else 0, self.serial))
 
-    def _trial(self, alpha: float) -> None:
-        _k_trial(self.F, self.I, float(alpha), self.serial)
+    def _direction_from(self, d: np.ndarray) -> float:
+        """The Newton direction from the host, d (2n,); returns G . d on the free DOFs."""
+        return float(_k_direction_from(self.F, self.I, np.ascontiguousarray(d, dtype=np.float64),
+                                       self.serial))
+
+    def _trial(self, alpha: float) -> tuple[float, float]:
+        """XT = X + alpha DX; returns (E_tot, min det F) there."""
+        E, jmin = _k_trial(self.F, self.I, float(alpha), self.serial)
+        return float(E), float(jmin)
 
     def _accept(self) -> None:
         _k_copy_nodes(self.F, self.I, _XT, _X, self.serial)
@@ -917,7 +998,7 @@ class Model:
         if x is not None:
             self.set_free_positions(x)
         self._gradient_norm2()
-        return self._nodes("G")
+        return self.g_host.reshape(self.n, 2).copy()
 
     def prepare_hessian(self, project: bool = False) -> None:
         """Element tangents (exact or PSD-projected), cable stiffnesses and the
@@ -1008,12 +1089,14 @@ class Model:
         r = np.empty(2 * self.n)
         bb, rr = _k_pcg_begin(self.F, self.I, 1 if warm else 0, r, self.serial)
         tol2 = tol * tol * bb
-        it, negcurv = 0, False
+        it, negcurv, indefinite = 0, False, False
         if rr > tol2:
             z = precondition(r)
             rz = float(r @ z)
-            _k_pcg_direction(self.F, self.I, z, 0.0, self.serial)
-            while it < max_iter:
+            indefinite = not rz > 0.0
+            if not indefinite:
+                _k_pcg_direction(self.F, self.I, z, 0.0, self.serial)
+            while not indefinite and it < max_iter:
                 pq = _k_pcg_matvec(self.F, self.I, self.serial)
                 if pq <= 0.0:
                     negcurv = True
@@ -1024,13 +1107,23 @@ class Model:
                     break
                 z = precondition(r)
                 rz_new = float(r @ z)
+                if not rz_new > 0.0:
+                    indefinite = True
+                    break
                 _k_pcg_direction(self.F, self.I, z, rz_new / rz, self.serial)
                 rz = rz_new
         res = float(np.sqrt(rr / bb)) if bb > 0 else 0.0
-        return CGStatus(it, bool(res <= tol), negcurv, res)
+        return CGStatus(it, bool(res <= tol), negcurv, res, indefinite)
 
     def cg_solution(self) -> np.ndarray:
         return self._nodes("CX")
+
+    def hessian_entries(self) -> np.ndarray:
+        """Element and segment Hessian blocks as last prepared, (36 m + 144 S,):
+        see ``_k_hessian_entries``."""
+        out = np.empty(36 * self.m + 144 * self.S)
+        _k_hessian_entries(self.F, self.I, out, self.serial)
+        return out
 
     def hessian_data(self) -> dict[str, np.ndarray]:
         """What the direct backend assembles from (after prepare_hessian)."""
