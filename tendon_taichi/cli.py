@@ -148,6 +148,7 @@ def cmd_simulate(args) -> int:
 OPTIMIZE_FLAGS = {
     "--sparsity": ("sparsity", float, "L0 sparsity weight w_sp"),
     "--continuity": ("continuity", float, "directional continuity weight w_ct"),
+    "--strand-end": ("strand_end", float, "strand-end weight w_end (tension imbalance at fiber nodes)"),
     "--contraction-reg": ("contraction_reg", float, "contraction regularizer weight w_ac"),
     "--tension-scale": ("tension_scale", float, "tension scale tau_ref, N"),
     "--initial-contraction": ("initial_contraction", float, "uniform starting ratio r0"),
@@ -176,12 +177,21 @@ def _stage_table(stages: list[dict]) -> list[str]:
     return rows
 
 
+def _add_optimize_flags(p: argparse.ArgumentParser) -> None:
+    for flag, (key, typ, text) in OPTIMIZE_FLAGS.items():
+        p.add_argument(flag, type=typ, default=None, help=f"{text} (scene [optimize] {key})")
+
+
+def _optimize_overrides(args) -> dict:
+    """The [optimize] settings given on the command line (key -> value or None)."""
+    return {key: getattr(args, flag[2:].replace("-", "_")) for flag, (key, _, _) in OPTIMIZE_FLAGS.items()}
+
+
 def cmd_optimize(args) -> int:
     from .runs import Interrupted, Progress, optimize
     from .scene import load_scene, with_overrides
 
-    overrides = {key: getattr(args, flag[2:].replace("-", "_"))
-                 for flag, (key, _, _) in OPTIMIZE_FLAGS.items()}
+    overrides = _optimize_overrides(args)
     given = [f for f, (k, _, _) in OPTIMIZE_FLAGS.items() if overrides[k] is not None]
     if args.resume:
         if given:
@@ -380,6 +390,55 @@ def cmd_bench(args) -> int:
     return 0
 
 
+# ------------------------------------------------------------------ planted
+def cmd_planted(args) -> int:
+    from .planted import MAX_TENDONS, plant, write_planted
+    from .scene import load_scene
+
+    t0 = time.perf_counter()
+    if not 1 <= args.tendons <= MAX_TENDONS:
+        raise InputError(f"--tendons must be 1..{MAX_TENDONS} (got {args.tendons})")
+    if args.seed < 0:
+        raise InputError(f"--seed must be >= 0 (got {args.seed})")
+    if args.level < 1:
+        raise InputError(f"--level must be >= 1 (got {args.level})")
+    scene = load_scene(args.scene)
+    text, layout = plant(scene, args.tendons, args.seed, args.level)
+    toml_path, json_path = write_planted(args.out, text, layout)
+    pose = layout["pose"]
+    summary = {"name": layout["name"], "scene": layout["scene"], "tendons": args.tendons,
+               "seed": args.seed, "level": args.level, "scene_file": str(toml_path),
+               "layout_file": str(json_path), "planted_length": layout["planted_length"],
+               "lengths": [t["length"] for t in layout["tendons"]],
+               "contraction_ratios": [t["contraction_ratio"] for t in layout["tendons"]],
+               "tensions": [t["tension"] for t in layout["tendons"]],
+               "max_target_displacement": pose["max_target_displacement"],
+               "max_target_displacement_rel": pose["max_target_displacement_rel"],
+               "body_size": pose["body_size"], "draws": layout["draws"],
+               "time_s": time.perf_counter() - t0}
+    _json_out(args, summary)
+    if args.json != "-":
+        print(f"{layout['name']}: {args.tendons} tendon{'s' if args.tendons > 1 else ''}, "
+              f"{100 * layout['planted_length']:.1f} cm planted, largest target displacement "
+              f"{100 * pose['max_target_displacement_rel']:.2f} % of L ({layout['draws']} draw"
+              f"{'s' if layout['draws'] > 1 else ''}); wrote {toml_path} and {json_path}")
+    return 0
+
+
+# ------------------------------------------------------------------ planted-bench
+def cmd_planted_bench(args) -> int:
+    from .planted_bench import run_suite, table
+
+    overrides = _optimize_overrides(args)
+    result = run_suite(args.suite, args.resolution, args.out, overrides, args.extractors, args.solver,
+                       args.cases)
+    _json_out(args, result)
+    if args.json != "-":
+        print("\n".join(table(result)))
+        print(f"outputs in {args.out}/ (planted_bench.json, planted_bench.csv, gallery.png)")
+    return 0
+
+
 # ------------------------------------------------------------------ main
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description="Design the tendon layout of a 2D soft robot.")
@@ -424,8 +483,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--log-every", type=int, default=1, metavar="N",
                    help="record the geometry every N-th iteration (scalars every iteration)")
     s.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    for flag, (key, typ, text) in OPTIMIZE_FLAGS.items():
-        s.add_argument(flag, type=typ, default=None, help=f"{text} (scene [optimize] {key})")
+    _add_optimize_flags(s)
     _add_json(s)
     s.set_defaults(func=cmd_optimize)
 
@@ -478,6 +536,31 @@ def build_parser() -> argparse.ArgumentParser:
                    help="time forward sensitivities only up to this many fibers (one solve each)")
     _add_json(s)
     s.set_defaults(func=cmd_bench)
+
+    s = sub.add_parser("planted", help="a scene whose goals random planted tendons reach (a benchmark "
+                                       "with a known answer)")
+    s.add_argument("scene", metavar="SCENE", help="built-in scene name or scene TOML file")
+    s.add_argument("--tendons", type=int, default=2, metavar="N", help="number of tendons, 1..5 (default 2)")
+    s.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
+    s.add_argument("--level", type=int, default=2, metavar="N",
+                   help="resolution level of the planted equilibrium (default 2)")
+    s.add_argument("--out", default=".", metavar="DIR",
+                   help="writes DIR/<scene>_planted_<N>t_s<S>.toml and .json (default: .)")
+    _add_json(s)
+    s.set_defaults(func=cmd_planted)
+
+    s = sub.add_parser("planted-bench", help="optimize + every extractor on a suite of planted layouts, "
+                                             "scored against what was planted")
+    s.add_argument("suite", metavar="DIR", nargs="?", default="benchmarks/planted",
+                   help="folder of planted cases, NAME.toml + NAME.json (default benchmarks/planted)")
+    s.add_argument("--resolution", type=int, default=2, metavar="N", help="resolution level (default 2)")
+    s.add_argument("--out", default="recordings/planted", metavar="DIR")
+    s.add_argument("--cases", nargs="+", metavar="NAME", help="run only these cases")
+    s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")
+    s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto")
+    _add_optimize_flags(s)
+    _add_json(s)
+    s.set_defaults(func=cmd_planted_bench)
     return p
 
 

@@ -13,7 +13,12 @@ through one adjoint solve.
   ``m_i = a0_i / L`` ("length") or 1 ("count");
 * ``continuity``: ``O_ct = w_ct sum_(a,b) m_ab cos^2(theta_ab) ((tau_a - tau_b)/tau_ref)^2``
   over fiber pairs sharing a node, ``m_ab = (a0_a + a0_b) / (2L)`` or 1;
-* ``contraction``: ``O_reg = w_ac sum_i (ac_i / a0_i)^2``.
+* ``contraction``: ``O_reg = w_ac sum_i (ac_i / a0_i)^2``;
+* ``strand_end``: ``O_end = w_end sum_v ((T1 - T2)^2 + (T3 + T4 + ...)^2) / tau_ref^2``
+  over the fiber nodes ``v`` outside the clamped band, ``T1 >= T2 >= ...`` the
+  tensions of the fibers meeting at ``v``: zero inside a clean strand (two equal
+  tensions), positive at a strand's end, a star or a tension jump - so each
+  extra tendon costs, and hinges of short fibers become expensive.
 """
 
 from __future__ import annotations
@@ -127,6 +132,46 @@ class ContractionTerm:
     def evaluate(self, state: State) -> TermValue:
         r = state.ac / self.a0
         return TermValue(float(self.weight * np.dot(r, r)), dac=2.0 * self.weight * r / self.a0)
+
+
+class StrandEndTerm:
+    """O_end = weight sum_v ((T1 - T2)^2 + (T3 + ...)^2) / tau_ref^2 over fiber nodes
+    away from the clamped band (a node whose triangle has a clamped corner does not
+    count: tendons may end at the base, where motors sit)."""
+
+    name = "strand_end"
+
+    def __init__(self, problem: Problem, weight: float, tension_scale: float):
+        fib = problem.fibers
+        self.weight = weight / tension_scale ** 2
+        self.n_fibers = fib.n_fibers
+        free = ~problem.fixed[problem.mesh.triangles[fib.embedding.tri]].any(axis=1)  # (k,)
+        ends = np.concatenate([fib.edges[:, 0], fib.edges[:, 1]])
+        ids = np.concatenate([np.arange(fib.n_fibers)] * 2)
+        keep = free[ends]
+        ends, ids = ends[keep], ids[keep]
+        order = np.argsort(ends, kind="stable")
+        ends, ids = ends[order], ids[order]
+        # (V, D) incident fiber ids per counted node, padded with n_fibers (tension 0)
+        uniq, start, count = np.unique(ends, return_index=True, return_counts=True)
+        D = int(count.max()) if len(count) else 2
+        self.incident = np.full((len(uniq), max(D, 2)), fib.n_fibers, dtype=np.int64)
+        col = np.arange(len(ends)) - np.repeat(start, count)
+        self.incident[np.repeat(np.arange(len(uniq)), count), col] = ids
+
+    def evaluate(self, state: State) -> TermValue:
+        T = np.append(state.tau, 0.0)[self.incident]  # (V, D)
+        order = np.argsort(-T, axis=1, kind="stable")
+        Ts = np.take_along_axis(T, order, axis=1)
+        jump = Ts[:, 0] - Ts[:, 1]
+        rest = Ts[:, 2:].sum(axis=1)
+        value = self.weight * float(np.dot(jump, jump) + np.dot(rest, rest))
+        g = np.empty_like(Ts)  # d/dTs
+        g[:, 0], g[:, 1] = 2.0 * jump, -2.0 * jump
+        g[:, 2:] = 2.0 * rest[:, None]
+        fib_sorted = np.take_along_axis(self.incident, order, axis=1)
+        dtau = np.bincount(fib_sorted.ravel(), self.weight * g.ravel(), self.n_fibers + 1)[:-1]
+        return TermValue(value, dtau=dtau)
 
 
 @dataclass

@@ -27,7 +27,7 @@ import scipy.optimize as so
 from .errors import ConvergenceError
 from .model import Model
 from .objectives import (ContinuityTerm, ContractionTerm, Evaluation, Objective, PoseTerm,
-                         SparsityTerm, State)
+                         SparsityTerm, State, StrandEndTerm)
 from .problem import Problem
 from .scene import OptimizeSettings
 from .solvers import Equilibrium, NewtonSolver
@@ -125,6 +125,7 @@ class SoftIK:
             terms = [PoseTerm(problem),
                      SparsityTerm(problem, s.sparsity, s.sparsity_measure, s.homotopy.k0),
                      ContinuityTerm(problem, s.continuity, s.tension_scale, s.continuity_measure),
+                     StrandEndTerm(problem, s.strand_end, s.tension_scale),
                      ContractionTerm(self.a0, s.contraction_reg)]
         else:
             self.a0 = cables.a0
@@ -141,12 +142,13 @@ class SoftIK:
 
     # ------------------------------------------------------------ stages
     def configure(self, k: float | None) -> None:
-        """Stage 0 (``k`` None): pose + contraction; else sparsity at ``k`` and continuity too."""
+        """Stage 0 (``k`` None): pose + contraction; else sparsity at ``k`` and the
+        strand terms (continuity, strand ends) too."""
         self.k = k
         active = {"pose", "contraction"}
         if k is not None:
             self.objective.term("sparsity").k = k
-            active |= {"sparsity", "continuity"}
+            active |= {"sparsity", "continuity", "strand_end"}
         self.objective.active = active
         self._last = None
 

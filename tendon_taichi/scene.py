@@ -117,8 +117,8 @@ class Homotopy:
 class OptimizeSettings:
     """Weights and schedule of the regularized soft IK (DESIGN.md section 3).
 
-    ``sparsity`` w_sp, ``continuity`` w_ct, ``contraction_reg`` w_ac
-    (dimensionless weights); ``tension_scale`` tau_ref (N);
+    ``sparsity`` w_sp, ``continuity`` w_ct, ``strand_end`` w_end,
+    ``contraction_reg`` w_ac (dimensionless weights); ``tension_scale`` tau_ref (N);
     ``initial_contraction`` r0 (ratio of rest length); ``active_threshold``
     (x tau_ref); ``sparsity_measure`` and ``continuity_measure`` are
     ``"length"`` (resolution independent, default) or ``"count"`` (the
@@ -130,6 +130,7 @@ class OptimizeSettings:
 
     sparsity: float = 1.0e-4
     continuity: float = 2.5e-5
+    strand_end: float = 1.0e-4
     contraction_reg: float = 1.0e-6
     tension_scale: float = 1.0
     initial_contraction: float = 0.005
@@ -317,6 +318,7 @@ def _read_optimize(r: _Reader, fibers: FiberSettings) -> OptimizeSettings:
     opt = OptimizeSettings(
         sparsity=r.number("sparsity", d.sparsity, ge=0.0),
         continuity=r.number("continuity", d.continuity, ge=0.0),
+        strand_end=r.number("strand_end", d.strand_end, ge=0.0),
         contraction_reg=r.number("contraction_reg", d.contraction_reg, ge=0.0),
         tension_scale=r.number("tension_scale", d.tension_scale, gt=0.0),
         initial_contraction=r.number("initial_contraction", d.initial_contraction,

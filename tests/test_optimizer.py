@@ -1,16 +1,17 @@
 """The regularized soft IK: adjoint gradients, and the optimizer on a planted layout."""
 
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from tendon_taichi import CableSet, Model, NewtonSolver, build_problem, load_scene, parse_scene
-from tendon_taichi.objectives import smoothstep
+from tendon_taichi.objectives import State, StrandEndTerm, smoothstep
 from tendon_taichi.optimizer import SoftIK, schedule_done, settled, stage_k
 from tendon_taichi.runs import optimize
 
-TERMS = ["pose", "sparsity", "continuity", "contraction"]
+TERMS = ["pose", "sparsity", "continuity", "strand_end", "contraction"]
 
 
 @pytest.fixture(scope="module")
@@ -22,7 +23,7 @@ def t_shape_1():
 @pytest.mark.parametrize("terms", [[t] for t in TERMS] + [TERMS], ids=lambda t: "+".join(t))
 def test_adjoint_gradient_matches_finite_differences(t_shape_1, solver, terms):
     p = t_shape_1
-    ik = SoftIK(p, p.scene.optimize, solver)
+    ik = SoftIK(p, replace(p.scene.optimize, strand_end=1e-4), solver)
     ik.newton.tol = ik.eval_tol = 1e-13
     ik.configure(0.4)  # a k inside the range of the tensions: the smoothstep is curved there
     ik.objective.active = set(terms)
@@ -42,6 +43,30 @@ def test_adjoint_gradient_matches_finite_differences(t_shape_1, solver, terms):
         fd = (vals[0] - vals[1]) / (2 * h)
         assert abs(fd - np.dot(g, d)) <= 1e-5 * abs(fd), (terms, fd, np.dot(g, d))
         assert abs(fd) > 1e-9
+
+
+def test_strand_end_term_counts_ends_stars_and_jumps(t_shape_1):
+    p = t_shape_1
+    term = StrandEndTerm(p, 2.0, 0.5)  # weight / tau_ref^2 = 8
+    fib = p.fibers
+    # a straight horizontal strand of 4 fibers in the arm, far from the clamp
+    y = fib.nodes[:, 1].max() - fib.spacing
+    row = np.flatnonzero((np.abs(fib.nodes[:, 1] - y) < 1e-9) & (fib.nodes[:, 0] > 0))
+    row = row[np.argsort(fib.nodes[row, 0])][:5]
+    strand = [int(np.flatnonzero((fib.edges == [a, b]).all(1) | (fib.edges == [b, a]).all(1))[0])
+              for a, b in zip(row[:-1], row[1:])]
+    x = p.mesh.nodes
+    tau = np.zeros(fib.n_fibers)
+    tau[strand] = 0.3
+    assert term.evaluate(State(x, tau, tau)).value == pytest.approx(8 * 2 * 0.3 ** 2)  # two ends
+    tau[strand[2]] = 0.5  # a jump at two inner nodes: 2 (0.2)^2 more, ends unchanged
+    assert term.evaluate(State(x, tau, tau)).value == pytest.approx(8 * (2 * 0.3 ** 2 + 2 * 0.2 ** 2))
+    rng = np.random.default_rng(3)
+    tau = rng.uniform(0, 1, fib.n_fibers) * (rng.uniform(size=fib.n_fibers) < 0.3)
+    tv = term.evaluate(State(x, tau, tau))
+    d, h = rng.standard_normal(fib.n_fibers) * (tau > 0), 1e-7  # slack fibers stay slack (tau' = 0)
+    fd = (term.evaluate(State(x, tau, tau + h * d)).value - term.evaluate(State(x, tau, tau - h * d)).value) / (2 * h)
+    assert np.dot(tv.dtau, d) == pytest.approx(fd, rel=1e-6)
 
 
 def test_smoothstep():

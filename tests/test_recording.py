@@ -41,9 +41,10 @@ def test_optimize_summary_follows_the_contract(reference):
         for key in ("stage", "k", "iterations", "pose_error", "pose_error_rel", "pose_error_max",
                     "active_fibers", "active_length", "tau_max", "objective", "time_s"):
             assert key in st
-        assert set(st["objective"]) == {"pose", "sparsity", "continuity", "contraction"}
+        assert set(st["objective"]) == {"pose", "sparsity", "continuity", "strand_end", "contraction"}
         assert st["pose_error_rel"] == pytest.approx(st["pose_error"] / s["body_size"])
-    assert s["stages"][0]["objective"]["sparsity"] == 0.0 < s["stages"][1]["objective"]["sparsity"]
+    for term in ("sparsity", "strand_end"):  # off in plain soft IK, on in the homotopy
+        assert s["stages"][0]["objective"][term] == 0.0 < s["stages"][1]["objective"][term]
     assert s["final"] == s["stages"][-1]
     d = np.load(s["export"])
     assert np.allclose(d["ac"], read_recording(path).stages[-1].ac, rtol=0, atol=0)

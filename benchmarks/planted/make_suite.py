@@ -1,0 +1,74 @@
+"""Regenerate the planted-layout suite listed in suite.toml (beside this file).
+
+Usage: python benchmarks/planted/make_suite.py [--no-gallery]
+Writes, per case, <scene>_planted_<n>t_s<seed>.toml and .json (exactly what
+`tendon-taichi planted SCENE --tendons N --seed S --level L --out
+benchmarks/planted` writes), README.md (the table of cases and the commands)
+and gallery.png (every layout on its planted equilibrium).
+"""
+
+import argparse
+import tomllib
+from pathlib import Path
+
+from tendon_taichi import load_scene, parse_scene
+from tendon_taichi.planted import plant, plot_layouts, write_planted
+
+HERE = Path(__file__).resolve().parent
+
+README = """# Planted-layout suite
+
+Scenes whose goals a known set of tendons reaches exactly: each case draws
+random smooth tendons in a built-in scene's body, contracts them by 5-10 %,
+solves the body with only those tendons (sliding cables, level {level}) and
+writes where the targets went as the goals. `<case>.toml` is the scene (it
+loads with `tendon-taichi optimize <case>.toml`), `<case>.json` the planted
+layout (per tendon: rest waypoints in m, anchor first; length; contraction;
+tension at the planted equilibrium). `gallery.png` shows every case: rest
+outline grey, planted equilibrium black, tendons in colour (dot: anchor),
+targets blue, goals green.
+
+| case | scene | tendons | seed | planted length (cm) | max target displacement (% of L) |
+|---|---|---|---|---|---|
+{rows}
+
+Regenerate everything (files, this README, the gallery):
+
+```bash
+python benchmarks/planted/make_suite.py
+```
+
+or one case:
+
+```bash
+{commands}
+```
+"""
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--no-gallery", action="store_true")
+    args = ap.parse_args()
+    suite = tomllib.loads((HERE / "suite.toml").read_text())
+    level = suite["level"]
+    rows, commands, cases = [], [], []
+    for case in suite["cases"]:
+        scene = load_scene(case["scene"])
+        text, layout = plant(scene, case["tendons"], case["seed"], level)
+        toml_path, _ = write_planted(HERE, text, layout)
+        cases.append((parse_scene(text, origin=str(toml_path)), layout))
+        rows.append(f"| {layout['name']} | {case['scene']} | {case['tendons']} | {case['seed']} | "
+                    f"{100 * layout['planted_length']:.1f} | "
+                    f"{100 * layout['pose']['max_target_displacement_rel']:.1f} |")
+        commands.append(f"tendon-taichi planted {case['scene']} --tendons {case['tendons']} "
+                        f"--seed {case['seed']} --level {level} --out benchmarks/planted")
+        print(rows[-1], flush=True)
+    (HERE / "README.md").write_text(README.format(level=level, rows="\n".join(rows),
+                                                  commands="\n".join(commands)))
+    if not args.no_gallery:
+        plot_layouts(HERE / "gallery.png", cases, columns=5, dpi=80)
+
+
+if __name__ == "__main__":
+    main()

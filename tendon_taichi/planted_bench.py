@@ -1,0 +1,276 @@
+"""``planted-bench``: the optimizer and every extractor on a suite of planted layouts.
+
+A suite is a folder of planted cases (``tendon-taichi planted``): per case a
+scene file ``NAME.toml`` whose goals were made by known tendons, and the
+layout ``NAME.json`` (``tendons`` with their rest ``waypoints``, ``length``,
+``planted_length``). Each case runs ``optimize`` and then every extractor on
+the last stage, and is scored against what was planted: pose error, active
+length / planted length, tendon count / planted count, kinks, worst capstan
+factor, realizable pose error, time. A case passes when its best extractor
+(the lowest realizable pose error among those that find at most planted + 1
+tendons) finds at most planted + 1 tendons, with a realizable pose error of
+at most 1 % of L, and the active length is at most twice the planted one.
+
+Cases are independent and described by plain data (:func:`run_case` takes a
+path, a level and settings, and returns a JSON-able dict), so that a sweep
+engine can run them as separate tasks.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+
+#: pass criteria (the issue's "how it is shown")
+MAX_EXTRA_TENDONS = 1
+MAX_REALIZABLE_POSE_REL = 0.01
+MAX_LENGTH_RATIO = 2.0
+
+
+@dataclass(frozen=True)
+class Case:
+    """One planted case: ``name``, its scene file and its planted ``layout``."""
+
+    name: str
+    scene_path: Path
+    layout: dict
+
+    @property
+    def planted_count(self) -> int:
+        return len(self.layout["tendons"])
+
+    @property
+    def planted_length(self) -> float:
+        return float(self.layout.get("planted_length", sum(t["length"] for t in self.layout["tendons"])))
+
+
+def load_suite(directory: str | Path) -> list[Case]:
+    """Every ``NAME.toml`` in ``directory`` with a layout ``NAME.json`` beside it, by name."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise InputError(f"planted suite '{d}' is not a folder")
+    cases = []
+    for toml in sorted(d.glob("*.toml")):
+        js = toml.with_suffix(".json")
+        if not js.exists():
+            continue
+        try:
+            layout = json.loads(js.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise InputError(f"planted layout '{js}' is unreadable: {exc}") from None
+        if not isinstance(layout, dict) or not isinstance(layout.get("tendons"), list):
+            raise InputError(f"planted layout '{js}' has no 'tendons' list")
+        cases.append(Case(toml.stem, toml, layout))
+    if not cases:
+        raise InputError(f"planted suite '{d}' has no case (NAME.toml with NAME.json)")
+    return cases
+
+
+def best_extractor(extractors: dict[str, dict], planted_count: int) -> str | None:
+    """The extractor whose tendons a designer would build: the lowest realizable pose
+    error among those finding at most planted + 1 tendons (else among all)."""
+    ok = {n: m for n, m in extractors.items() if "error" not in m}
+    if not ok:
+        return None
+    few = {n: m for n, m in ok.items() if m["count"] <= planted_count + MAX_EXTRA_TENDONS} or ok
+    return min(few, key=lambda n: (few[n]["realizable_pose_error_rel"], few[n]["count"], n))
+
+
+def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Path,
+             overrides: dict | None = None, extractors: list[str] | None = None,
+             solver: str = "auto") -> dict:
+    """Optimize one planted case and run the extractors on its last stage; the
+    recording goes to ``out_dir/NAME-rLEVEL.rrd``. Returns the case's figures."""
+    from .runs import optimize
+    from .scene import load_scene, with_overrides
+    from .tendons import extract
+
+    t0 = time.perf_counter()
+    scene = load_scene(str(scene_path))
+    if overrides:
+        scene = with_overrides(scene, overrides)
+    name = Path(scene_path).stem
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rec = out_dir / f"{name}-r{level}.rrd"
+    run = optimize(scene, level, solver, record=rec)
+    t_opt = time.perf_counter() - t0
+    ex = extract(rec, extractors)
+    final = run.summary["final"]
+    planted_count = len(layout["tendons"])
+    planted_length = float(layout.get("planted_length", sum(t["length"] for t in layout["tendons"])))
+    per = {}
+    for r in ex.results:
+        if r.error is not None:
+            per[r.name] = {"error": r.error}
+            continue
+        m = r.metrics
+        per[r.name] = {"count": int(m["count"]), "total_length": m["total_length"], "kinks": int(m["kinks"]),
+                       "capstan_worst": m["capstan_worst"], "tension_cv": m["tension_cv"],
+                       "realizable_pose_error_rel": m["realizable_pose_error_rel"],
+                       "tendons": [t.waypoints.tolist() for t in r.tendons]}
+    best = best_extractor(per, planted_count)
+    length_ratio = final["active_length"] / planted_length if planted_length > 0 else float("inf")
+    b = per.get(best, {})
+    passed = bool(best is not None and b["count"] <= planted_count + MAX_EXTRA_TENDONS
+                  and b["realizable_pose_error_rel"] <= MAX_REALIZABLE_POSE_REL
+                  and length_ratio <= MAX_LENGTH_RATIO)
+    return {"case": name, "scene": run.summary.get("scene", scene.name), "level": level,
+            "planted_count": planted_count, "planted_length": planted_length,
+            "pose_error_rel": final["pose_error_rel"], "active_fibers": final["active_fibers"],
+            "active_length": final["active_length"], "length_ratio": length_ratio,
+            "stages": len(run.stages), "extractors": per, "best": best,
+            "count": b.get("count"), "count_ratio": (b["count"] / planted_count) if best else None,
+            "realizable_pose_error_rel": b.get("realizable_pose_error_rel"),
+            "kinks": b.get("kinks"), "capstan_worst": b.get("capstan_worst"),
+            "passed": passed, "optimize_s": t_opt, "time_s": time.perf_counter() - t0,
+            "recording": str(rec)}
+
+
+def totals(cases: list[dict]) -> dict:
+    """Suite totals: cases, passes, and medians of the ratios."""
+    done = [c for c in cases if "error" not in c]
+
+    def med(key):
+        vals = [c[key] for c in done if c.get(key) is not None]
+        return float(np.median(vals)) if vals else None
+
+    return {"cases": len(cases), "failed": len(cases) - len(done), "passed": sum(c["passed"] for c in done),
+            "count_within_planted_plus_one": sum(1 for c in done if c["count"] is not None
+                                                 and c["count"] <= c["planted_count"] + MAX_EXTRA_TENDONS),
+            "median_length_ratio": med("length_ratio"), "median_count_ratio": med("count_ratio"),
+            "median_realizable_pose_error_rel": med("realizable_pose_error_rel"),
+            "time_s": float(sum(c.get("time_s", 0.0) for c in cases))}
+
+
+CSV_COLUMNS = ("case", "scene", "level", "planted_count", "count", "best", "planted_length", "active_length",
+               "length_ratio", "pose_error_rel", "realizable_pose_error_rel", "kinks", "capstan_worst",
+               "passed", "time_s", "error")
+
+
+def write_outputs(result: dict, out_dir: Path, suite: list[Case]) -> None:
+    """planted_bench.json, planted_bench.csv and gallery.png (planted vs found)."""
+    from .export import atomic_path, write_json
+
+    write_json(result, out_dir / "planted_bench.json")
+    with atomic_path(out_dir / "planted_bench.csv") as tmp:
+        with open(tmp, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(CSV_COLUMNS)
+            for c in result["cases"]:
+                w.writerow([c.get(k, "") if c.get(k) is not None else "" for k in CSV_COLUMNS])
+    plot_gallery(out_dir / "gallery.png", result, {c.name: c for c in suite})
+
+
+def plot_gallery(path: Path, result: dict, suite: dict[str, Case]) -> Path:
+    """One panel per case: the body, the planted tendons (dashed black) and the best
+    extractor's tendons (colours), in rest coordinates."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .export import atomic_path
+    from .scene import load_scene
+
+    cases = result["cases"]
+    cols = min(4, max(1, len(cases)))
+    rows = (len(cases) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.3 * rows), squeeze=False)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    for ax, c in zip(axes.ravel(), cases):
+        case = suite.get(c["case"])
+        if case is not None:
+            body = load_scene(str(case.scene_path)).body
+            for poly in ([body.outline] if body.outline is not None else []) + list(body.holes):
+                q = np.vstack([poly, poly[:1]])
+                ax.plot(q[:, 0], q[:, 1], color="0.6", lw=0.8)
+            for t in case.layout["tendons"]:
+                w = np.asarray(t["waypoints"])
+                ax.plot(w[:, 0], w[:, 1], "--", color="k", lw=1.2)
+        if "error" in c:
+            ax.set_title(f"{c['case']}\nfailed: {c['error'][:40]}", fontsize=7)
+        else:
+            for i, w in enumerate(c["extractors"].get(c["best"], {}).get("tendons", [])):
+                w = np.asarray(w)
+                ax.plot(w[:, 0], w[:, 1], color=colors[i % len(colors)], lw=2.0, alpha=0.85)
+            rp = c["realizable_pose_error_rel"]
+            ax.set_title(f"{c['case']} ({'pass' if c['passed'] else 'miss'})\n"
+                         f"{c['count']}/{c['planted_count']} tendons ({c['best']}), "
+                         f"length x{c['length_ratio']:.2f}, real. {100 * rp:.2f}%", fontsize=7)
+        ax.set_aspect("equal")
+    fig.suptitle("planted (dashed) vs found (colour)", fontsize=10)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return path
+
+
+def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides: dict | None = None,
+              extractors: list[str] | None = None, solver: str = "auto", cases: list[str] | None = None,
+              progress=None) -> dict:
+    """Run every case of a suite (or the named ``cases``), one after the other;
+    outputs are rewritten after each case, so an interrupted run keeps what it did."""
+    progress = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    suite = load_suite(directory)
+    if cases:
+        unknown = set(cases) - {c.name for c in suite}
+        if unknown:
+            raise InputError(f"no such case in the suite: {', '.join(sorted(unknown))}")
+        suite = [c for c in suite if c.name in cases]
+    from .scene import load_scene, with_overrides
+
+    overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
+    for case in suite:  # bad scene files or settings stop the run before it starts
+        with_overrides(load_scene(str(case.scene_path)), overrides)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result = {"suite": str(directory), "level": level, "settings": overrides, "cases": []}
+    t0 = time.perf_counter()
+    for i, case in enumerate(suite):
+        try:
+            row = run_case(case.scene_path, case.layout, level, out_dir / "cases", overrides, extractors, solver)
+        except KeyboardInterrupt:
+            raise
+        except Exception as exc:  # a failed case is recorded and the suite goes on
+            row = {"case": case.name, "level": level, "planted_count": case.planted_count,
+                   "error": f"{type(exc).__name__}: {exc}", "passed": False}
+        result["cases"].append(row)
+        result["totals"] = totals(result["cases"])
+        write_outputs(result, out_dir, suite)
+        el = time.perf_counter() - t0
+        msg = row.get("error") or (f"{row['count']}/{row['planted_count']} tendons, length x{row['length_ratio']:.2f}, "
+                                   f"realizable {100 * row['realizable_pose_error_rel']:.2f}%, "
+                                   f"{'pass' if row['passed'] else 'miss'}")
+        progress(f"[{i + 1}/{len(suite)}] {case.name}: {msg} ({row.get('time_s', 0.0):.0f} s; "
+                 f"elapsed {el:.0f} s, about {el / (i + 1) * (len(suite) - i - 1):.0f} s left)")
+    return result
+
+
+def table(result: dict) -> list[str]:
+    """The human-readable table of a planted-bench result."""
+    out = [f"{'case':<28} {'tendons':>8} {'best':>17} {'length':>7} {'pose':>6} {'real.':>6} {'kinks':>5} "
+           f"{'capstan':>7} {'time':>6}  result"]
+    for c in result["cases"]:
+        if "error" in c:
+            out.append(f"{c['case']:<28} failed: {c['error']}")
+            continue
+        out.append(f"{c['case']:<28} {c['count']:>3} / {c['planted_count']:<2} {c['best']:>17} "
+                   f"x{c['length_ratio']:>5.2f} {100 * c['pose_error_rel']:>5.2f}% "
+                   f"{100 * c['realizable_pose_error_rel']:>5.2f}% {c['kinks']:>5} {c['capstan_worst']:>7.3f} "
+                   f"{c['time_s']:>5.0f}s  {'pass' if c['passed'] else 'miss'}")
+    t = result["totals"]
+    out.append(f"passed {t['passed']} of {t['cases']} ({t['failed']} failed); tendon count <= planted + 1 in "
+               f"{t['count_within_planted_plus_one']}; median length ratio {t['median_length_ratio']}, "
+               f"total time {t['time_s']:.0f} s")
+    return out
