@@ -91,8 +91,10 @@ def test_recording_holds_the_layout(reference):
 
 def _start(args, cwd):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
+    # a shell's background job inherits SIGINT ignored; the child must see Ctrl-C as a user would
     return subprocess.Popen([sys.executable, "-m", "tendon_taichi", *map(str, args)], cwd=cwd, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
