@@ -196,7 +196,8 @@ def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int =
         picked = resolve_solver("auto", entry["dofs"])
         for solver in solvers:
             fig = measure_solver(p, solver, repeat, forward_max_fibers, progress)
-            if level in optimize_levels and (optimize_solver == "each" or resolve_solver(solver, entry["dofs"]) == picked):
+            optimize_here = optimize_solver == "each" or resolve_solver(solver, entry["dofs"]) == picked
+            if level in optimize_levels and optimize_here:
                 fig.update(measure_optimize(scene, level, solver, out_dir, progress))
             fig["peak_memory_mb"] = peak_memory_mb()
             entry["solvers"][fig.pop("solver") if solver == "auto" else solver] = fig

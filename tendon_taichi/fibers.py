@@ -60,21 +60,26 @@ class FiberGraph:
         return d / self.a0[:, None]
 
     @cached_property
-    def pairs(self) -> FiberPairs:
-        """Every pair of fibers meeting at a fiber node, with cos^2 of their rest angle."""
+    def incidence(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fibers meeting at each fiber node, CSR: ``start`` (k+1,) and ``fibers``
+        (2f,), node v's being ``fibers[start[v]:start[v+1]]`` in ascending id."""
         ends = np.concatenate([self.edges[:, 0], self.edges[:, 1]])
         fib = np.concatenate([np.arange(self.n_fibers)] * 2)
         order = np.lexsort((fib, ends))
-        ends, fib = ends[order], fib[order]
-        starts = np.flatnonzero(np.r_[True, ends[1:] != ends[:-1]])
-        stops = np.r_[starts[1:], len(ends)]
+        start = np.searchsorted(ends[order], np.arange(len(self.nodes) + 1))
+        return start, fib[order]
+
+    @cached_property
+    def pairs(self) -> FiberPairs:
+        """Every pair of fibers meeting at a fiber node, with cos^2 of their rest angle."""
+        start, fib = self.incidence
         pa, pb, pn = [], [], []
-        for s, e in zip(starts, stops):
-            ids = fib[s:e]
+        for v in np.flatnonzero(np.diff(start)):
+            ids = fib[start[v]:start[v + 1]]
             ia, ib = np.triu_indices(len(ids), k=1)
             pa.append(ids[ia])
             pb.append(ids[ib])
-            pn.append(np.full(len(ia), ends[s]))
+            pn.append(np.full(len(ia), v))
         a, b = np.concatenate(pa), np.concatenate(pb)
         cos = np.einsum("pd,pd->p", self.directions[a], self.directions[b])
         return FiberPairs(np.stack([a, b], axis=1), np.concatenate(pn), cos * cos)

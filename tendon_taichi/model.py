@@ -281,6 +281,16 @@ def _update_cables(F: ti.template(), I: ti.template(), xslot, serial: ti.templat
 
 
 @ti.func
+def _segment_vectors_along(F: ti.template(), I: ti.template(), coef, serial: ti.template()):
+    """SEG_VEC = w_c n_s for each segment s of cable c, w the per-cable array at
+    ``coef`` (tensions: the cable forces; any weights: sum_c w_c dL_c/dx)."""
+    ti.loop_config(serialize=serial)
+    for s in range(I[_S]):
+        c = I[I[_SEG] + 3 * s + 2]
+        _set_v(F, I, _SEG_VEC, s, _f(F, I, coef, c) * _v(F, I, _SEG_N, s))
+
+
+@ti.func
 def _gather(F: ti.template(), I: ti.template(), dst, elems: ti.template(), masked: ti.template(), serial: ti.template()):
     """dst_i = sum of the element vectors (if ``elems``) and the segment vectors
     (times their signed barycentric weights) incident to node i."""
@@ -331,10 +341,7 @@ def _gradient(F: ti.template(), I: ti.template(), serial: ti.template()):
         P = neo_hookean_P(_deformation_gradient(F, I, _X, e), mu, lam)
         _store_element_vectors(F, I, e, _f(F, I, _VOL, e) * P @ _m2(F, I, _BM, e).transpose())
     _update_cables(F, I, _X, serial)
-    ti.loop_config(serialize=serial)
-    for s in range(I[_S]):
-        c = I[I[_SEG] + 3 * s + 2]
-        _set_v(F, I, _SEG_VEC, s, _f(F, I, _TAU, c) * _v(F, I, _SEG_N, s))
+    _segment_vectors_along(F, I, _TAU, serial)
     _gather(F, I, _G, True, False, serial)
     ti.loop_config(serialize=serial)
     for i in range(I[_N]):
@@ -600,10 +607,7 @@ def _k_update_cables(F: F64, I: I32, serial: ti.template()):
 def _k_cables_to_nodes(F: F64, I: I32, serial: ti.template()):
     """VOUT = sum_c CCOEF_c dL_c/dx."""
     _update_cables(F, I, _X, serial)
-    ti.loop_config(serialize=serial)
-    for s in range(I[_S]):
-        c = I[I[_SEG] + 3 * s + 2]
-        _set_v(F, I, _SEG_VEC, s, _f(F, I, _CCOEF, c) * _v(F, I, _SEG_N, s))
+    _segment_vectors_along(F, I, _CCOEF, serial)
     _gather(F, I, _VOUT, False, False, serial)
 
 

@@ -146,18 +146,16 @@ class StrandEndTerm:
         self.weight = weight / tension_scale ** 2
         self.n_fibers = fib.n_fibers
         free = ~problem.fixed[problem.mesh.triangles[fib.embedding.tri]].any(axis=1)  # (k,)
-        ends = np.concatenate([fib.edges[:, 0], fib.edges[:, 1]])
-        ids = np.concatenate([np.arange(fib.n_fibers)] * 2)
-        keep = free[ends]
-        ends, ids = ends[keep], ids[keep]
-        order = np.argsort(ends, kind="stable")
-        ends, ids = ends[order], ids[order]
+        start, ids = fib.incidence
+        count = np.diff(start)
+        nodes = np.flatnonzero(free & (count > 0))
+        c = count[nodes]
         # (V, D) incident fiber ids per counted node, padded with n_fibers (tension 0)
-        uniq, start, count = np.unique(ends, return_index=True, return_counts=True)
-        D = int(count.max()) if len(count) else 2
-        self.incident = np.full((len(uniq), max(D, 2)), fib.n_fibers, dtype=np.int64)
-        col = np.arange(len(ends)) - np.repeat(start, count)
-        self.incident[np.repeat(np.arange(len(uniq)), count), col] = ids
+        self.incident = np.full((len(nodes), max(int(c.max()) if len(c) else 2, 2)), fib.n_fibers,
+                                dtype=np.int64)
+        rows = np.repeat(np.arange(len(nodes)), c)
+        cols = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
+        self.incident[rows, cols] = ids[np.repeat(free & (count > 0), count)]
 
     def evaluate(self, state: State) -> TermValue:
         T = np.append(state.tau, 0.0)[self.incident]  # (V, D)

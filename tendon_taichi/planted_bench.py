@@ -97,7 +97,8 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
     scene = load_scene(str(scene_path))
     if overrides:
         scene = with_overrides(scene, overrides)
-    name = Path(scene_path).stem
+    case = Case(Path(scene_path).stem, Path(scene_path), layout)
+    name, planted_count, planted_length = case.name, case.planted_count, case.planted_length
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     rec = out_dir / f"{name}-r{level}.rrd"
@@ -105,8 +106,6 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
     t_opt = time.perf_counter() - t0
     ex = extract(rec, extractors)
     final = run.summary["final"]
-    planted_count = len(layout["tendons"])
-    planted_length = float(layout.get("planted_length", sum(t["length"] for t in layout["tendons"])))
     per = {}
     for r in ex.results:
         if r.error is not None:
