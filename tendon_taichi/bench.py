@@ -69,7 +69,7 @@ def measure_solver(problem, solver: str, repeat: int, forward_max_fibers: int, p
     r0, r1 = _designs(problem)
     ik = SoftIK(problem, problem.scene.optimize, solver)
     ik.configure(None)  # pose + contraction: what soft IK differentiates
-    m, newton, lin = ik.model, ik.newton, ik.linear
+    m, lin = ik.model, ik.linear
     exact = NewtonSolver(m, lin)  # plain exact Newton, as `simulate` solves
     t = time.perf_counter()
     exact.solve(ac=r0 * a0, x0=problem.mesh.nodes)  # warm-up: compiles what this backend needs
@@ -152,12 +152,13 @@ def forward_gradient(ik: SoftIK, r: np.ndarray) -> np.ndarray:
     return grad * ik.a0
 
 
-def measure_optimize(scene: Scene, level: int, solver: str, out_dir: Path, progress) -> dict:
-    """The whole regularized optimization, then every installed extractor on its last stage."""
+def optimize_case(scene: Scene, level: int, solver: str, out_dir: str) -> dict:
+    """The whole regularized optimization, then every installed extractor on its
+    last stage (a task of :func:`tendon_taichi.cluster.run_tasks`)."""
     from .runs import optimize
     from .tendons import extract
 
-    rec = out_dir / f"{scene.name}-r{level}-{solver}.rrd"
+    rec = Path(out_dir) / f"{scene.name}-r{level}-{solver}.rrd"
     t = time.perf_counter()
     run = optimize(scene, level, solver, record=rec)
     dt = time.perf_counter() - t
@@ -165,29 +166,41 @@ def measure_optimize(scene: Scene, level: int, solver: str, out_dir: Path, progr
     res = {"optimize_s": {"median": dt, "min": dt, "max": dt}, "stages": len(run.stages),
            "pose_error_rel": final["pose_error_rel"], "active_fibers": final["active_fibers"],
            "active_length": final["active_length"], "evaluations": run.summary.get("evaluations")}
-    progress(f"  {solver}: optimize {dt:.1f} s, {len(run.stages)} stages, pose {100 * final['pose_error_rel']:.2f} %, "
-             f"active {100 * final['active_length']:.1f} cm")
     ex = extract(rec, record=False)
     res["extractors"] = {r.name: ({"error": r.error} if r.error else
                                   {"tendons": r.metrics["count"], "kinks": r.metrics["kinks"],
                                    "realizable_pose_error_rel": r.metrics["realizable_pose_error_rel"]})
                          for r in ex.results}
+    res["peak_memory_mb"] = peak_memory_mb()
     return res
+
+
+def _describe_optimize(res: dict) -> str:
+    tendons = ", ".join(f"{n} {e.get('tendons', 'failed')}" for n, e in res["extractors"].items())
+    return (f"optimize {res['optimize_s']['median']:.1f} s, {res['stages']} stages, pose "
+            f"{100 * res['pose_error_rel']:.2f} %, active {100 * res['active_length']:.1f} cm; tendons: {tendons}")
 
 
 def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int = 3,
               out_dir: str | Path = "recordings/bench", optimize_levels: list[int] | None = None,
-              forward_max_fibers: int = 2500, progress=None, optimize_solver: str = "each") -> dict:
+              forward_max_fibers: int = 2500, progress=None, optimize_solver: str = "each",
+              workers: int | None = 0, scheduler: str | None = None) -> dict:
     """Run the benchmark and write bench.json, bench.csv and bench.png into ``out_dir``.
 
     ``optimize_solver``: ``each`` runs the whole optimization with every measured
     solver; ``auto`` once per level, with the backend that ``--solver auto`` picks
-    at that size (what a user gets by default), reported under that backend."""
+    at that size (what a user gets by default), reported under that backend.
+    The optimizations run after all other measurements, as tasks of
+    :func:`tendon_taichi.cluster.run_tasks` (``workers`` 0, the default: in this
+    process, one after the other; else on a local or an existing Dask cluster)."""
+    from .cluster import Task, case_id, run_tasks
+    from .errors import Stopped
+
     progress = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     optimize_levels = levels if optimize_levels is None else optimize_levels
-    rows = []
+    rows, jobs = [], []
     for level in levels:
         p = build_problem(scene, level)
         entry = {"level": level, **p.counts(), "solvers": {}}
@@ -196,17 +209,33 @@ def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int =
         picked = resolve_solver("auto", entry["dofs"])
         for solver in solvers:
             fig = measure_solver(p, solver, repeat, forward_max_fibers, progress)
+            fig["peak_memory_mb"] = peak_memory_mb()
+            name = fig.pop("solver") if solver == "auto" else solver
+            entry["solvers"][name] = fig
             optimize_here = optimize_solver == "each" or resolve_solver(solver, entry["dofs"]) == picked
             if level in optimize_levels and optimize_here:
-                fig.update(measure_optimize(scene, level, solver, out_dir, progress))
-            fig["peak_memory_mb"] = peak_memory_mb()
-            entry["solvers"][fig.pop("solver") if solver == "auto" else solver] = fig
+                jobs.append((fig, Task(case_id({"kind": "bench", "scene": scene.source, "level": level,
+                                                "solver": solver}),
+                                       f"level {level} {solver}", optimize_case, (scene, level, solver, str(out_dir)))))
         rows.append(entry)
+    report = run_tasks([t for _, t in jobs], None, workers, scheduler, progress, describe=_describe_optimize)
+    figs = {t.id: fig for fig, t in jobs}
+    for o in report.outcomes:
+        fig = figs[o.task.id]
+        if o.error is not None:
+            fig["optimize_error"] = o.error
+            continue
+        res = dict(o.value)
+        fig["peak_memory_mb"] = max(fig["peak_memory_mb"], res.pop("peak_memory_mb"))
+        fig.update(res)
     # each backend's first solve in the process included compiling its kernels
     comp = sum(f["first_solve_s"] - f["equilibrium_cold_s"]["median"] for f in rows[0]["solvers"].values())
     result = {"scene": scene.name, "machine": machine(), "compile_s": comp, "repeat": repeat, "levels": rows,
-              "exponents": exponents(rows)}
+              "exponents": exponents(rows), "optimize_engine": report.engine}
     write_outputs(result, out_dir)
+    if report.interrupted:
+        raise Stopped(f"interrupted during the optimizations; {len(report.outcomes)} of {len(jobs)} finished "
+                      f"are in '{out_dir}'")
     return result
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, TendonError
+from .errors import InputError, Stopped, TendonError
 
 PROG = "tendon-taichi"
 SOLVER_CHOICES = ("auto", "cg", "cg-jacobi", "direct")
@@ -377,8 +377,11 @@ def cmd_bench(args) -> int:
     if args.repeat < 1 or any(lv < 1 for lv in args.levels):
         raise InputError("--repeat and --levels must be >= 1")
     optimize_levels = [] if args.no_optimize else args.optimize_levels
+    workers, scheduler = _cluster_args(args)
+    workers = 0 if workers is None and scheduler is None else workers
     result = run_bench(scene, args.levels, args.solver, args.repeat, args.out, optimize_levels,
-                       args.forward_max_fibers, optimize_solver=args.optimize_solver)
+                       args.forward_max_fibers, optimize_solver=args.optimize_solver, workers=workers,
+                       scheduler=scheduler)
     _json_out(args, result)
     if args.json != "-":
         print("\n".join(table(result)))
@@ -430,13 +433,44 @@ def cmd_planted_bench(args) -> int:
     from .planted_bench import run_suite, table
 
     overrides = _optimize_overrides(args)
+    workers, scheduler = _cluster_args(args)
     result = run_suite(args.suite, args.resolution, args.out, overrides, args.extractors, args.solver,
-                       args.cases)
+                       args.cases, workers=workers, scheduler=scheduler)
     _json_out(args, result)
     if args.json != "-":
         print("\n".join(table(result)))
         print(f"outputs in {args.out}/ (planted_bench.json, planted_bench.csv, gallery.png)")
     return 0
+
+
+# ------------------------------------------------------------------ sweep
+def _add_cluster_flags(p: argparse.ArgumentParser, default_workers: str) -> None:
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help=f"worker processes of the local Dask cluster ({default_workers}; 0: run the cases "
+                        f"one after the other in this process)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask cluster (tcp://HOST:PORT of a `dask scheduler`); "
+                        "it is left running")
+
+
+def _cluster_args(args) -> tuple[int | None, str | None]:
+    if args.workers is not None and args.workers < 0:
+        raise InputError(f"--workers must be >= 0 (got {args.workers})")
+    return args.workers, args.scheduler
+
+
+def cmd_sweep(args) -> int:
+    from .sweep import load_sweep, run, table
+
+    workers, scheduler = _cluster_args(args)
+    sweep = load_sweep(args.sweep)
+    out = args.out or str(Path("recordings") / "sweeps" / sweep.name)
+    result = run(sweep, out, workers, scheduler)
+    _json_out(args, result)
+    if args.json != "-":
+        print("\n".join(table(result)))
+        print(f"outputs in {out}/ (sweep.json, sweep.csv, sweep.png, cases/)")
+    return 4 if result["failed"] else 0
 
 
 # ------------------------------------------------------------------ main
@@ -534,6 +568,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "with the one --solver auto picks there")
     s.add_argument("--forward-max-fibers", type=int, default=2500, metavar="N",
                    help="time forward sensitivities only up to this many fibers (one solve each)")
+    _add_cluster_flags(s, "for the whole optimizations; default: run them in this process, after the other "
+                          "measurements")
     _add_json(s)
     s.set_defaults(func=cmd_bench)
 
@@ -559,8 +595,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")
     s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto")
     _add_optimize_flags(s)
+    _add_cluster_flags(s, "default: one per core")
     _add_json(s)
     s.set_defaults(func=cmd_planted_bench)
+
+    s = sub.add_parser("sweep", help="many optimize + extract cases (scenes x levels x a grid of settings) "
+                                     "as tasks on Dask")
+    s.add_argument("sweep", metavar="SWEEP.toml", help="sweep file (DESIGN.md section 6)")
+    s.add_argument("--out", default=None, metavar="DIR", help="default recordings/sweeps/<name>")
+    _add_cluster_flags(s, "default: one per core")
+    _add_json(s)
+    s.set_defaults(func=cmd_sweep)
     return p
 
 
@@ -579,8 +624,7 @@ def main(argv: list[str] | None = None) -> int:
         runtime.configure(arch=args.arch, threads=args.threads)
         return int(args.func(args) or 0)
     except TendonError as exc:
-        from .runs import Interrupted
-        if isinstance(exc, Interrupted):
+        if isinstance(exc, Stopped):
             print(f"{PROG}: {exc}", file=sys.stderr)
             return 130
         print(f"{PROG}: error: {exc}", file=sys.stderr)

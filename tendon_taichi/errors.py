@@ -20,3 +20,7 @@ class ConvergenceError(TendonError):
 
 class InputError(TendonError):
     """A command-line input (file, option value) is unusable."""
+
+
+class Stopped(TendonError):
+    """The user stopped a run (Ctrl-C); what it finished is kept. Exit status 130."""

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import csv
 import json
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -215,44 +214,64 @@ def plot_gallery(path: Path, result: dict, suite: dict[str, Case]) -> Path:
     return path
 
 
+def _case_row(case: Case, level: int, o) -> dict:
+    if o.error is not None:
+        return {"case": case.name, "level": level, "planted_count": case.planted_count, "error": o.error,
+                "passed": False, "reused": o.reused}
+    return {**o.value, "reused": o.reused}
+
+
+def _describe(row: dict) -> str:
+    return (f"{row['count']}/{row['planted_count']} tendons, length x{row['length_ratio']:.2f}, "
+            f"realizable {100 * row['realizable_pose_error_rel']:.2f}%, {'pass' if row['passed'] else 'miss'}")
+
+
 def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides: dict | None = None,
               extractors: list[str] | None = None, solver: str = "auto", cases: list[str] | None = None,
-              progress=None) -> dict:
-    """Run every case of a suite (or the named ``cases``), one after the other;
-    outputs are rewritten after each case, so an interrupted run keeps what it did."""
-    progress = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
+              progress=None, workers: int | None = None, scheduler: str | None = None) -> dict:
+    """Run every case of a suite (or the named ``cases``) as tasks of
+    :func:`tendon_taichi.cluster.run_tasks` (``workers``: local Dask cluster size,
+    None: one per core, 0: in this process; ``scheduler``: an existing cluster).
+    Outputs are rewritten after each case, and a re-run reuses the finished ones
+    (``out_dir/cases/<id>/result.json``), so an interrupted run keeps what it did."""
+    from .cluster import Task, case_id, run_tasks
+    from .errors import Stopped
+    from .extraction import available_extractors
+    from .scene import load_scene, with_overrides
+
     suite = load_suite(directory)
     if cases:
         unknown = set(cases) - {c.name for c in suite}
         if unknown:
             raise InputError(f"no such case in the suite: {', '.join(sorted(unknown))}")
         suite = [c for c in suite if c.name in cases]
-    from .scene import load_scene, with_overrides
-
     overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
     for case in suite:  # bad scene files or settings stop the run before it starts
         with_overrides(load_scene(str(case.scene_path)), overrides)
+    names = sorted(extractors or available_extractors())
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    tasks = [Task(case_id({"kind": "planted", "scene": case.scene_path.read_text(), "layout": case.layout,
+                           "level": level, "settings": overrides, "extractors": names, "solver": solver}),
+                  case.name, run_case,
+                  (str(case.scene_path), case.layout, level, str(out_dir / "cases"), overrides, names, solver))
+             for case in suite]
+    by_name = {c.name: c for c in suite}
     result = {"suite": str(directory), "level": level, "settings": overrides, "cases": []}
-    t0 = time.perf_counter()
-    for i, case in enumerate(suite):
-        try:
-            row = run_case(case.scene_path, case.layout, level, out_dir / "cases", overrides, extractors, solver)
-        except KeyboardInterrupt:
-            raise
-        except Exception as exc:  # a failed case is recorded and the suite goes on
-            row = {"case": case.name, "level": level, "planted_count": case.planted_count,
-                   "error": f"{type(exc).__name__}: {exc}", "passed": False}
-        result["cases"].append(row)
+    done = {}
+
+    def on_outcome(o) -> None:
+        done[o.task.id] = _case_row(by_name[o.task.label], level, o)
+        result["cases"] = [done[t.id] for t in tasks if t.id in done]
         result["totals"] = totals(result["cases"])
         write_outputs(result, out_dir, suite)
-        el = time.perf_counter() - t0
-        msg = row.get("error") or (f"{row['count']}/{row['planted_count']} tendons, length x{row['length_ratio']:.2f}, "
-                                   f"realizable {100 * row['realizable_pose_error_rel']:.2f}%, "
-                                   f"{'pass' if row['passed'] else 'miss'}")
-        progress(f"[{i + 1}/{len(suite)}] {case.name}: {msg} ({row.get('time_s', 0.0):.0f} s; "
-                 f"elapsed {el:.0f} s, about {el / (i + 1) * (len(suite) - i - 1):.0f} s left)")
+
+    report = run_tasks(tasks, out_dir / "cases", workers, scheduler, progress, on_outcome, _describe)
+    result["engine"] = report.engine
+    if report.outcomes:
+        write_outputs(result, out_dir, suite)
+    if report.interrupted:
+        raise Stopped(f"interrupted: {len(report.outcomes)} of {len(tasks)} case(s) finished and kept in "
+                      f"'{out_dir}'; run the same command again to do the rest")
     return result
 
 

@@ -103,10 +103,22 @@ def plot_compare(path: str | Path, extraction) -> Path:
     return Path(path)
 
 
+def _quality_series(rows: list[dict]) -> dict[str, list[dict]]:
+    """Per series name, one dict per level with that level's optimization figures
+    (empty where none ran). When no level ran more than one solver's optimization
+    (``--optimize-solver auto``), all levels form one series, ``auto``."""
+    solvers = sorted({s for r in rows for s, f in r["solvers"].items() if "active_length" in f})
+    if all(sum("active_length" in f for f in r["solvers"].values()) <= 1 for r in rows) and len(solvers) > 1:
+        return {"auto": [next((f for f in r["solvers"].values() if "active_length" in f), {}) for r in rows]}
+    return {s: [r["solvers"].get(s, {}) if "active_length" in r["solvers"].get(s, {}) else {} for r in rows]
+            for s in solvers}
+
+
 def plot_bench(path: str | Path, result: dict) -> Path:
-    """Two panels: time against DOFs (log-log) per operation and solver, with the
-    fitted exponent in the legend; quality (active length, tendons, realizable pose
-    error) against the level."""
+    """Left: time against DOFs (log-log) per operation and solver, with the fitted
+    exponent in the legend. Right, against the level: active length and
+    idealized pose error; tendon count per extractor; realizable pose error per
+    extractor."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -115,7 +127,10 @@ def plot_bench(path: str | Path, result: dict) -> Path:
     from .export import atomic_path
 
     rows = result["levels"]
-    fig, (ax, aq) = plt.subplots(1, 2, figsize=(13, 5))
+    fig = plt.figure(figsize=(14, 6))
+    grid = fig.add_gridspec(3, 2, width_ratios=(1.35, 1))
+    ax = fig.add_subplot(grid[:, 0])
+    qa, qt, qr = (fig.add_subplot(grid[i, 1]) for i in range(3))
     markers = dict(zip(TIMINGS, "osD^v*"))
     styles = ["-", "--", ":", "-."]
     solvers = sorted({s for r in rows for s in r["solvers"]})
@@ -134,31 +149,108 @@ def plot_bench(path: str | Path, result: dict) -> Path:
     ax.legend(fontsize=6.5, ncol=2)
     ax.grid(True, which="both", alpha=0.3)
     levels = [r["level"] for r in rows]
-    for si, s in enumerate(solvers):
-        q = [r["solvers"].get(s, {}) for r in rows]
-        if not any("active_length" in f for f in q):
-            continue
-        aq.plot(levels, [100 * f.get("active_length", np.nan) for f in q], "o" + styles[si % 4],
-                label=f"{s}: active length (cm)")
-        aq.plot(levels, [100 * f.get("pose_error_rel", np.nan) for f in q], "s" + styles[si % 4],
+    series = _quality_series(rows)
+    for si, (s, q) in enumerate(series.items()):
+        st = styles[si % 4]
+        qa.plot(levels, [100 * f.get("active_length", np.nan) for f in q], "o" + st, label=f"{s}: active length (cm)")
+        qa.plot(levels, [100 * f.get("pose_error_rel", np.nan) for f in q], "s" + st,
                 label=f"{s}: idealized pose error (% of L)")
         names = sorted({n for f in q for n in f.get("extractors", {})})
-        for n in names:
+        for ni, n in enumerate(names):
             ext = [f.get("extractors", {}).get(n, {}) for f in q]
-            aq.plot(levels, [e.get("tendons", np.nan) for e in ext], "^" + styles[si % 4],
-                    label=f"{s}/{n}: tendons")
-            aq.plot(levels, [100 * e.get("realizable_pose_error_rel", np.nan) for e in ext], "v" + styles[si % 4],
-                    label=f"{s}/{n}: realizable pose error (% of L)")
-    aq.set_xlabel("resolution level")
-    aq.set_xticks(levels)
-    aq.set_title("quality against resolution", fontsize=10)
-    if aq.get_legend_handles_labels()[0]:
-        aq.legend(fontsize=6.5)
-    else:
-        aq.text(0.5, 0.5, "no optimization run (--no-optimize)", ha="center", transform=aq.transAxes)
-    aq.grid(True, alpha=0.3)
+            tag = n if len(series) == 1 else f"{s}/{n}"
+            qt.plot(levels, [e.get("tendons", np.nan) for e in ext], "^" + st, label=tag)
+            qr.plot(levels, [100 * e.get("realizable_pose_error_rel", np.nan) for e in ext], "v" + st, label=tag)
+    for a_, title in ((qa, "optimization"), (qt, "tendons"), (qr, "realizable pose error (% of L)")):
+        a_.set_xticks(levels)
+        a_.grid(True, alpha=0.3)
+        a_.set_ylabel(title, fontsize=8)
+        if a_.get_legend_handles_labels()[0]:
+            a_.legend(fontsize=6.5)
+    qt.set_ylim(bottom=0)
+    qr.set_ylim(bottom=0)
+    qa.set_title("quality against resolution" + (" (solver auto picks per level)" if "auto" in series else ""),
+                 fontsize=10)
+    qr.set_xlabel("resolution level")
+    if not series:
+        qa.text(0.5, 0.5, "no optimization run (--no-optimize)", ha="center", transform=qa.transAxes)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def _swept(result: dict) -> list[tuple[str, list]]:
+    """The dimensions a sweep varied: each grid key with two or more values, the
+    level when several; a case index when nothing varied."""
+    dims = [(f"settings.{k}", sorted(set(v), key=float)) for k, v in result["grid"].items()
+            if len(set(v)) > 1 and all(isinstance(x, (int, float)) for x in v)]
+    if len(result["levels"]) > 1:
+        dims.append(("level", sorted(result["levels"])))
+    return dims or [("case", None)]
+
+
+def plot_sweep(path: str | Path, result: dict) -> Path:
+    """A grid of panels: rows are tendon count, realizable pose error, active length
+    and time; columns are the swept settings (values as evenly spaced ticks).
+    Colour: scene; marker: extractor."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .export import atomic_path
+
+    cases = [c for c in result["cases"] if "error" not in c]
+    dims = _swept(result)
+    names = result["extractors"]
+    scenes = list(dict.fromkeys(c["scene"] for c in cases))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    markers = "os^vD*P"
+    rows = [("tendons", lambda c, n: c["extract"].get(n, {}).get("count")),
+            ("realizable pose error (% of L)",
+             lambda c, n: 100 * c["extract"][n]["realizable_pose_error_rel"] if "count" in c["extract"].get(n, {})
+             else None),
+            ("active length (cm)", lambda c, n: 100 * c["optimize"]["active_length"]),
+            ("time (s)", lambda c, n: c["time_s"])]
+    fig, axes = plt.subplots(len(rows), len(dims), figsize=(max(7.5, 4.2 * len(dims)), 2.4 * len(rows)),
+                             squeeze=False)
+    for j, (key, values) in enumerate(dims):
+        for i, (ylabel, get) in enumerate(rows):
+            ax = axes[i, j]
+            per_extractor = i < 2
+            for si, scene in enumerate(scenes):
+                for ni, n in enumerate(names if per_extractor else [None]):
+                    pts = []
+                    for ci, c in enumerate(cases):
+                        if c["scene"] != scene:
+                            continue
+                        y = get(c, n)
+                        if y is None:
+                            continue
+                        if values is None:
+                            x = ci
+                        else:
+                            v = c["level"] if key == "level" else c["settings"][key.split(".", 1)[1]]
+                            x = values.index(v)
+                        pts.append((x + 0.08 * (ni - (len(names) - 1) / 2) * per_extractor, y))
+                    if pts:
+                        label = scene + (f" / {n}" if per_extractor else "")
+                        ax.plot(*zip(*pts), markers[ni % len(markers)] if per_extractor else "o",
+                                color=colors[si % len(colors)], alpha=0.8, ms=5, ls="none", label=label)
+            if values is not None:
+                ax.set_xticks(range(len(values)), [f"{v:g}" for v in values], fontsize=7)
+            if i == len(rows) - 1:
+                ax.set_xlabel(key.replace("settings.", ""))
+            if j == 0:
+                ax.set_ylabel(ylabel, fontsize=8)
+            ax.grid(True, alpha=0.3)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7)
+    fig.suptitle(f"sweep '{result['name']}': {len(cases)} cases (colour: scene; marker: extractor)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.02 + 0.02 * ((len(labels) + 2) // 3), 1, 0.97))
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
     return Path(path)

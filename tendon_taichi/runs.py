@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .errors import InputError, TendonError
+from .errors import InputError, Stopped
 from .export import write_export
 from .plots import plot_stages
 from .model import Model
@@ -26,7 +26,7 @@ from .scene import Scene
 UNREACHED = 0.05
 
 
-class Interrupted(TendonError):
+class Interrupted(Stopped):
     """Ctrl-C during a run; ``completed`` stages are in the recording."""
 
     def __init__(self, completed: int, recording: Path, summary: dict):

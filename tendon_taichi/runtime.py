@@ -28,6 +28,10 @@ ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu")
 #: costs a fixed ~0.1 ms to dispatch on the CPU backend (measured by bench).
 DEFAULT_PARALLEL_THRESHOLD = 20000
 
+#: BLAS threads (numpy, scipy): our vectors are short (<= ~1e5) and threaded
+#: OpenBLAS made a level-5 warm CG solve 3.5x slower (72 vs 250 ms, bench)
+DEFAULT_BLAS_THREADS = 1
+
 _settings = {
     "arch": None,
     "threads": None,
@@ -92,7 +96,21 @@ def init() -> str:
         print(f"tendon-taichi: warning: Taichi arch '{arch}' is not available, running on '{actual}'",
               file=sys.stderr)
     _state.update(initialized=True, arch=actual, init_s=time.perf_counter() - t0)
+    _limit_blas()
     return actual
+
+
+def _limit_blas() -> None:
+    """Cap the BLAS thread pools (``TENDON_TAICHI_BLAS_THREADS``, default 1)."""
+    from threadpoolctl import threadpool_limits
+
+    env = os.environ.get("TENDON_TAICHI_BLAS_THREADS")
+    try:
+        n = max(1, int(env)) if env else DEFAULT_BLAS_THREADS
+    except ValueError:
+        raise InputError(f"TENDON_TAICHI_BLAS_THREADS must be an integer (got '{env}')") from None
+    threadpool_limits(limits=n, user_api="blas")
+    _state["blas_threads"] = n
 
 
 def ensure_init() -> str:
@@ -119,6 +137,7 @@ def info() -> dict:
         "parallel_threshold": parallel_threshold(),
         "taichi": ti.__version__ if hasattr(ti, "__version__") else None,
         "init_s": _state["init_s"],
+        "blas_threads": _state.get("blas_threads"),
     }
 
 

@@ -1,0 +1,257 @@
+"""sweep: cases as Dask tasks give the figures of the same cases run one by one in
+this process; a re-run reuses them; an existing cluster (scheduler + workers on
+127.0.0.1) gives the same figures; a worker killed mid-case is retried; Ctrl-C
+keeps the finished cases; bad input is one line and writes nothing."""
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from conftest import run_cli
+from tendon_taichi.cluster import case_id
+from tendon_taichi.errors import InputError, SceneError
+from tendon_taichi.sweep import load_sweep, parse_sweep, run_case
+
+TINY = """
+name = "tiny"
+scenes = ["t_shape", "finger"]
+levels = [1]
+extractors = ["strands", "path_cover"]
+[grid]
+sparsity = [1.0e-4, 3.0e-4]
+[set]
+stage_iterations = 15
+"""
+
+
+def _leaves(prefix, value, out):
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _leaves(f"{prefix}.{k}", v, out)
+    elif isinstance(value, (int, float)) and not isinstance(value, bool) and "time" not in prefix:
+        out[prefix] = float(value)
+    return out
+
+
+def figures(row: dict) -> dict:
+    """Every number of a case's optimize and extract figures, except timings."""
+    return _leaves("optimize", row["optimize"], _leaves("extract", row["extract"], {}))
+
+
+def assert_same_figures(rows: list[dict], reference: dict[str, dict]) -> None:
+    assert {r["case"] for r in rows} == set(reference)
+    for r in rows:
+        assert "error" not in r, r["error"]
+        got, want = figures(r), reference[r["case"]]
+        assert got.keys() == want.keys()
+        for k in want:
+            assert math.isclose(got[k], want[k], rel_tol=1e-9, abs_tol=1e-300), (r["case"], k, got[k], want[k])
+
+
+@pytest.fixture(scope="module")
+def sweep_file(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sweep")
+    (d / "tiny.toml").write_text(TINY)
+    return d / "tiny.toml"
+
+
+@pytest.fixture(scope="module")
+def in_process(sweep_file, tmp_path_factory):
+    """The figures of every case, each run by sweep.run_case in this process."""
+    sw = load_sweep(sweep_file)
+    out = tmp_path_factory.mktemp("one-by-one")
+    return {c.id: figures(run_case(c.scene, c.level, sw.solver, sw.extractors, str(out / c.id))) for c in sw.cases}
+
+
+def _sweep(sweep_file, out, *extra, timeout=600):
+    r = run_cli("sweep", sweep_file, "--out", out, "--json", *extra, timeout=timeout)
+    assert r.returncode == 0, r.stderr
+    result = json.loads(r.stdout)
+    assert result == json.loads((out / "sweep.json").read_text())
+    return result, r.stderr
+
+
+def test_expansion_and_ids(sweep_file):
+    sw = load_sweep(sweep_file)
+    assert len(sw.cases) == 4
+    assert [(c.scene.name, c.settings["sparsity"]) for c in sw.cases] == [
+        ("t_shape", 1e-4), ("t_shape", 3e-4), ("finger", 1e-4), ("finger", 3e-4)]
+    assert all(c.settings["stage_iterations"] == 15 and c.scene.optimize.stage_iterations == 15 for c in sw.cases)
+    assert [c.scene.optimize.sparsity for c in sw.cases] == [1e-4, 3e-4, 1e-4, 3e-4]
+    assert len({c.id for c in sw.cases}) == 4
+    assert [c.id for c in load_sweep(sweep_file).cases] == [c.id for c in sw.cases]  # stable
+    assert case_id({"a": 1, "b": 2.0}) == case_id({"b": 2.0, "a": 1})
+    assert case_id({"a": 1, "b": 2.0}) != case_id({"a": 1, "b": 2.5})
+
+
+@pytest.mark.parametrize("doc, message", [
+    ({"scenes": ["t_shape"], "colour": 1}, "unknown key 'colour'"),
+    ({"scenes": []}, "'scenes' must be a non-empty list"),
+    ({"scenes": ["no_such_scene"]}, "unknown scene 'no_such_scene'"),
+    ({"scenes": ["t_shape"], "levels": [0]}, "'levels' must be"),
+    ({"scenes": ["t_shape"], "extractors": ["nope"]}, "unknown extractor 'nope'"),
+    ({"scenes": ["t_shape"], "grid": {"sparsity": 1e-4}}, "grid.sparsity must be a non-empty list"),
+    ({"scenes": ["t_shape"], "grid": {"sparsty": [1e-4]}}, "unknown optimize setting 'sparsty'"),
+    ({"scenes": ["t_shape"], "grid": {"sparsity": [-1.0]}}, "sparsity"),
+    ({"scenes": ["t_shape"], "grid": {"sparsity": [1e-4]}, "set": {"sparsity": 1e-4}}, "both in [grid] and in [set]"),
+    ({"scenes": ["t_shape"], "solver": "lu"}, "'solver' must be one of"),
+])
+def test_bad_sweep_files_are_rejected(doc, message):
+    with pytest.raises((InputError, SceneError), match=message.replace("[", r"\[").replace("]", r"\]")):
+        parse_sweep(doc, "bad.toml")
+
+
+@pytest.mark.parametrize("text, extra, message", [
+    ("scenes = [", (), "invalid TOML"),
+    ('scenes = ["t_shape"]\n[grid]\nwobble = [1]\n', (), "unknown optimize setting 'wobble'"),
+    ('scenes = ["nowhere.toml"]\n', (), "does not exist"),
+    ('scenes = ["t_shape"]\n', ("--scheduler", "tcp://127.0.0.1:9"), "cannot reach the Dask scheduler"),
+    ('scenes = ["t_shape"]\n', ("--workers", "-1"), "--workers must be >= 0"),
+])
+def test_bad_input_is_one_line_and_writes_nothing(tmp_path, text, extra, message):
+    (tmp_path / "s.toml").write_text(text)
+    r = run_cli("sweep", tmp_path / "s.toml", "--out", tmp_path / "out", *extra, timeout=120)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0] and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "out" / "sweep.json").exists()
+
+
+def test_local_cluster_matches_one_by_one_and_reruns_reuse(sweep_file, in_process, tmp_path):
+    out = tmp_path / "out"
+    result, err = _sweep(sweep_file, out, "--workers", "2")
+    assert result["engine"]["kind"] == "local" and result["engine"]["workers"] == 2
+    assert "dashboard" in err and "[4/4]" in err
+    assert result["failed"] == 0 and not any(r["reused"] for r in result["cases"])
+    assert_same_figures(result["cases"], in_process)
+    assert len({r["worker"] for r in result["cases"]}) == 2  # both workers took cases
+    startup = result["engine"]["worker_startup"]  # Taichi started once per worker process, then warmed up
+    assert len({w["pid"] for w in startup}) == 2 and all(w["warm_up_s"] > 0 for w in startup)
+    assert {r["worker"].rsplit(":", 1)[1] for r in result["cases"]} == {str(w["pid"]) for w in startup}
+    for r in result["cases"]:
+        d = out / "cases" / r["case"]
+        assert {"run.rrd", "run.npz", "optimize.json", "compare.json", "result.json"} <= {p.name for p in d.iterdir()}
+        compare = json.loads((d / "compare.json").read_text())
+        assert [e["name"] for e in compare["extractors"]] == ["strands", "path_cover"]
+    header = (out / "sweep.csv").read_text().splitlines()[0].split(",")
+    assert {"case", "settings.sparsity", "optimize.pose_error_rel", "extract.strands.count",
+            "extract.path_cover.realizable_pose_error_rel", "time_s"} <= set(header)
+    assert (out / "sweep.png").stat().st_size > 10000
+
+    again, _ = _sweep(sweep_file, out, "--workers", "2")
+    assert all(r["reused"] for r in again["cases"]) and again["engine"]["kind"] == "none"
+    assert_same_figures(again["cases"], in_process)
+
+
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
+    """`dask scheduler` and two `dask worker` processes on 127.0.0.1."""
+    d = tmp_path_factory.mktemp("cluster")
+    sched_file = d / "scheduler.json"
+    procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--dashboard-address", ":0", "--scheduler-file", str(sched_file)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        for _ in range(600):
+            if sched_file.exists() and sched_file.stat().st_size:
+                break
+            time.sleep(0.1)
+        address = json.loads(sched_file.read_text())["address"]
+        for _ in range(2):
+            procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", "--scheduler-file",
+                                           str(sched_file), "--nthreads", "1", "--nworkers", "1",
+                                           "--host", "127.0.0.1"],
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        yield address
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+def test_existing_cluster_gives_the_same_figures(sweep_file, in_process, dask_cluster, tmp_path):
+    result, err = _sweep(sweep_file, tmp_path / "out", "--scheduler", dask_cluster)
+    assert result["engine"]["kind"] == "scheduler" and result["engine"]["workers"] == 2
+    assert_same_figures(result["cases"], in_process)
+    from distributed import Client
+    with Client(dask_cluster, timeout=10) as c:  # the command left the cluster running
+        assert len(c.scheduler_info()["workers"]) == 2
+
+
+def test_a_worker_killed_mid_case_is_retried(sweep_file, in_process, dask_cluster, tmp_path):
+    from distributed import Client
+
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "tendon_taichi", "sweep", str(sweep_file), "--out", str(out),
+                             "--scheduler", dask_cluster, "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    killed = None
+    with Client(dask_cluster, timeout=10) as c:
+        deadline = time.time() + 300
+        while killed is None and time.time() < deadline and proc.poll() is None:
+            busy = {w: ts for w, ts in c.processing().items() if ts}
+            if busy and list(out.glob("cases/*/run.rrd")):  # a case is under way
+                pids = c.run(os.getpid)
+                killed = pids[next(iter(busy))]
+                os.kill(killed, signal.SIGKILL)
+            time.sleep(0.2)
+    stdout, stderr = proc.communicate(timeout=600)
+    assert killed is not None, "no case was seen running"
+    assert proc.returncode == 0, stderr
+    result = json.loads(stdout)
+    assert len(result["cases"]) == 4 and result["failed"] == 0
+    assert_same_figures(result["cases"], in_process)
+    with Client(dask_cluster, timeout=10) as c:  # the nanny restarted the killed worker
+        c.wait_for_workers(2, timeout=60)
+
+
+def test_ctrl_c_keeps_the_finished_cases(sweep_file, in_process, tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "tendon_taichi", "sweep", str(sweep_file), "--out", str(out),
+                             "--workers", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.time() + 300
+    while not list(out.glob("cases/*/result.json")) and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "interrupted" in stderr.strip().splitlines()[-1]
+    result = json.loads((out / "sweep.json").read_text())
+    assert result["interrupted"] and 1 <= len(result["cases"]) < 4
+    assert_same_figures(result["cases"], {r["case"]: in_process[r["case"]] for r in result["cases"]})
+    assert (out / "sweep.csv").read_text().count("\n") == len(result["cases"]) + 1
+
+
+def test_a_failing_case_is_recorded_and_the_sweep_goes_on(tmp_path):
+    from tendon_taichi.scene import load_scene
+
+    text = load_scene("finger").source
+    assert "point = [0.10, 0.01]" in text
+    (tmp_path / "bad.toml").write_text(text.replace("point = [0.10, 0.01]", "point = [0.50, 0.01]")
+                                       .replace('name = "finger"', 'name = "finger_bad"'))
+    (tmp_path / "s.toml").write_text('scenes = ["finger", "bad.toml"]\nextractors = ["strands"]\n'
+                                     '[set]\nstage_iterations = 5\n')
+    out = tmp_path / "out"
+    r = run_cli("sweep", tmp_path / "s.toml", "--out", out, "--workers", "0", "--json")
+    assert r.returncode == 4, r.stderr  # finished, with a failed case
+    result = json.loads(r.stdout)
+    good, bad = result["cases"]
+    assert "error" not in good and good["extract"]["strands"]["count"] >= 1
+    assert "lies outside the body" in bad["error"] and "Traceback" in bad["traceback"]
+    assert result["failed"] == 1 and result["engine"]["kind"] == "in-process"
+    assert not (out / "cases" / bad["case"] / "result.json").exists()
+    again = json.loads(run_cli("sweep", tmp_path / "s.toml", "--out", out, "--workers", "0", "--json").stdout)
+    assert [c["reused"] for c in again["cases"]] == [True, False]  # the failed one is tried again
+    assert again["cases"][0]["optimize"] == good["optimize"]
