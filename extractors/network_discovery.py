@@ -31,14 +31,8 @@ class NetworkDiscoveryExtractor(Extractor):
             return []
         keep = state.active & (tau >= options.threshold * tau.max())
         used = ~keep
-        tendons = []
-        for seed in sorted(range(len(tau)), key=lambda f: -tau[f]):
-            if used[seed]:
-                continue
-            used[seed] = True
-            visited = {int(v) for v in view.edges[seed]}
-            start, fibers = view.grow(seed, lambda v, f: self._grow(view, tau, v, used, visited))
-            tendons.append(view.tendon(start, fibers, state))
+        tendons = view.greedy_tendons(state, used, lambda seed, visited:
+                                      lambda v, f: self._grow(view, tau, v, used, visited))
         return prune(tendons, options)
 
     @staticmethod

@@ -35,17 +35,11 @@ class StrandsExtractor(Extractor):
         tau, active = state.tau, state.active
         used = ~active  # slack fibers never seed a strand
 
-        tendons = []
-        for seed in sorted(range(len(tau)), key=lambda f: -tau[f]):
-            if used[seed]:
-                continue
-            used[seed] = True
-            visited = {int(v) for v in view.edges[seed]}
-            tensions = [tau[seed]]
-            start, fibers = view.grow(seed, lambda v, f: self._grow(view, state, options, v, f, used,
-                                                                     visited, tensions))
-            tendons.append(view.tendon(start, fibers, state))
-        return prune(tendons, options)
+        def stepper(seed, visited):
+            tensions = [tau[seed]]  # the strand's tensions so far, shared by both ends
+            return lambda v, f: self._grow(view, state, options, v, f, used, visited, tensions)
+
+        return prune(view.greedy_tendons(state, used, stepper), options)
 
     def _grow(self, view, state, o, v, f_in, used, visited, tensions) -> list[int]:
         """Extend from node v (reached along f_in); returns the fibers added, in order."""

@@ -37,6 +37,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from distributed.diagnostics.plugin import WorkerPlugin
+
 from . import __version__
 from .errors import InputError
 
@@ -124,12 +126,6 @@ def start_worker(arch: str | None, threads: int | None, warm: bool) -> dict:
 def worker_startup() -> dict:
     """This worker's start-up figures (for ``client.run``)."""
     return dict(_startup)
-
-
-try:
-    from distributed.diagnostics.plugin import WorkerPlugin
-except ImportError:  # pragma: no cover - dask[distributed] is a dependency
-    WorkerPlugin = object
 
 
 class TaichiWorker(WorkerPlugin):
@@ -300,9 +296,7 @@ def run_tasks(tasks: list[Task], store: str | Path | None = None, workers: int |
             if client is not None:
                 _run_on_client(client, fresh, finish, engine)
             elif fresh:
-                from . import runtime
                 engine.update(kind="in-process", workers=1)
-                start_worker(runtime.info()["arch"], None, False)
                 for t in fresh:
                     finish(_outcome(t, execute(t.fn, t.args)))
     except KeyboardInterrupt:

@@ -153,6 +153,22 @@ class FiberView:
             start = self.other(f, start)
         return start, front[::-1] + [seed] + back
 
+    def greedy_tendons(self, state: IdealizedState, used: np.ndarray, stepper) -> list[Tendon]:
+        """Tendons grown greedily: every fiber not yet ``used`` seeds one, strongest
+        tension first, grown at both ends by :meth:`grow`. ``stepper(seed, visited)``
+        returns that seed's ``extend(node, fiber)``; ``visited`` (the path's fiber
+        nodes, seeded with the seed's two ends) and ``used`` (bool per fiber) are
+        shared with it and updated by it."""
+        tendons = []
+        for seed in sorted(range(len(state.tau)), key=lambda f: -state.tau[f]):
+            if used[seed]:
+                continue
+            used[seed] = True
+            visited = {int(v) for v in self.edges[seed]}
+            start, fibers = self.grow(seed, stepper(seed, visited))
+            tendons.append(self.tendon(start, fibers, state))
+        return tendons
+
     def tendon(self, start: int, fibers: list[int], state: IdealizedState) -> Tendon:
         """The tendon following ``fibers`` from node ``start``, oriented so that its
         pull end is the end nearer to the clamped region (where motors sit)."""
