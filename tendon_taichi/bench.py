@@ -26,6 +26,7 @@ import numpy as np
 
 from . import runtime
 from .optimizer import ADJOINT_TOL, SoftIK
+from .errors import InputError
 from .problem import build_problem
 from .scene import Scene
 from .solvers import DirectSolver, NewtonSolver, resolve_solver
@@ -96,7 +97,7 @@ def measure_solver(problem, solver: str, repeat: int, forward_max_fibers: int, p
     # the adjoint solve and one full gradient, at the design r0
     exact.solve(ac=r0 * a0, x0=problem.mesh.nodes)
     ik.evaluate(r0)
-    rhs = ik.objective.evaluate(_state(ik, r0)).dx
+    rhs = ik.objective.evaluate(_states(ik, r0)).dx[0]
     rhs[problem.fixed] = 0.0
     adj, grad = [], []
     for _ in range(repeat):
@@ -124,10 +125,11 @@ def measure_solver(problem, solver: str, repeat: int, forward_max_fibers: int, p
     return out
 
 
-def _state(ik: SoftIK, r: np.ndarray):
+def _states(ik: SoftIK, r: np.ndarray):
+    """The last evaluated point as the objective's per-pose states (one pose here)."""
     from .objectives import State
-    x, tau = ik.state()
-    return State(x, r * ik.a0, tau)
+    xs, taus = ik.state()
+    return [State(xs[0], r * ik.a0, taus[0])]
 
 
 def forward_gradient(ik: SoftIK, r: np.ndarray) -> np.ndarray:
@@ -136,11 +138,11 @@ def forward_gradient(ik: SoftIK, r: np.ndarray) -> np.ndarray:
     ik.evaluate(r)
     m, lin = ik.model, ik.linear
     cab = m.cable_state()
-    ev = ik.objective.evaluate(_state(ik, r))
-    dOdx = ev.dx + m.length_jacobian_product(ev.dtau * cab["kc"])
+    ev = ik.objective.evaluate(_states(ik, r))
+    dOdx = ev.dx[0] + m.length_jacobian_product(ev.dtau[0] * cab["kc"])
     dOdx[ik.problem.fixed] = 0.0
     n_f = len(r)
-    grad = ev.dac + ev.dtau * cab["tau_ac"]
+    grad = ev.dac[0] + ev.dtau[0] * cab["tau_ac"]
     lin.solve(dOdx, tol=ADJOINT_TOL)  # prepares (direct: factorizes) the Hessian once
     direct = isinstance(lin, DirectSolver)
     for i in range(n_f):
@@ -196,6 +198,8 @@ def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int =
     from .cluster import Task, case_id, run_tasks
     from .errors import Stopped
 
+    if len(scene.poses) > 1:
+        raise InputError(f"bench measures one-pose scenes; '{scene.name}' has {len(scene.poses)} poses")
     progress = progress or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

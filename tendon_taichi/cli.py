@@ -124,7 +124,8 @@ def cmd_simulate(args) -> int:
         "max_displacement": float(disp.max()), "tau_max": float(eq.tau.max()),
         "active_fibers": int((eq.tau > 0).sum()),
         "targets": [{"point": list(t.point), "goal": list(t.goal), "position": pos[i].tolist(),
-                     "error": float(err[i])} for i, t in enumerate(scene.targets)],
+                     "error": float(err[i]), "pose": problem.pose_names[problem.target_pose[i]]}
+                    for i, t in enumerate(scene.targets)],
         "pose_error": float(np.sqrt((err ** 2).sum())), "pose_error_rel": float(np.sqrt((err ** 2).sum()) / L),
         "solve_s": eq.time_s, "time_s": time.perf_counter() - t0,
         "export": str(export), "vtu": args.vtu,
@@ -149,6 +150,8 @@ OPTIMIZE_FLAGS = {
     "--sparsity": ("sparsity", float, "L0 sparsity weight w_sp"),
     "--continuity": ("continuity", float, "directional continuity weight w_ct"),
     "--strand-end": ("strand_end", float, "strand-end weight w_end (tension imbalance at fiber nodes)"),
+    "--effort": ("effort", float, "actuation-effort weight w_eff (tension x length, in every pose; "
+                                  "against co-contraction)"),
     "--contraction-reg": ("contraction_reg", float, "contraction regularizer weight w_ac"),
     "--tension-scale": ("tension_scale", float, "tension scale tau_ref, N"),
     "--initial-contraction": ("initial_contraction", float, "uniform starting ratio r0"),
@@ -406,7 +409,9 @@ def cmd_planted(args) -> int:
     if args.level < 1:
         raise InputError(f"--level must be >= 1 (got {args.level})")
     scene = load_scene(args.scene)
-    text, layout = plant(scene, args.tendons, args.seed, args.level)
+    if not 1 <= args.poses <= 4:
+        raise InputError(f"--poses must be 1..4 (got {args.poses})")
+    text, layout = plant(scene, args.tendons, args.seed, args.level, poses=args.poses)
     toml_path, json_path = write_planted(args.out, text, layout)
     pose = layout["pose"]
     summary = {"name": layout["name"], "scene": layout["scene"], "tendons": args.tendons,
@@ -417,7 +422,7 @@ def cmd_planted(args) -> int:
                "tensions": [t["tension"] for t in layout["tendons"]],
                "max_target_displacement": pose["max_target_displacement"],
                "max_target_displacement_rel": pose["max_target_displacement_rel"],
-               "body_size": pose["body_size"], "draws": layout["draws"],
+               "body_size": pose["body_size"], "draws": layout["draws"], "poses": args.poses,
                "time_s": time.perf_counter() - t0}
     _json_out(args, summary)
     if args.json != "-":
@@ -580,8 +585,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
     s.add_argument("--level", type=int, default=2, metavar="N",
                    help="resolution level of the planted equilibrium (default 2)")
+    s.add_argument("--poses", type=int, default=1, metavar="P",
+                   help="target poses made by the same tendons, 1..4 (default 1; see DESIGN.md section 6)")
     s.add_argument("--out", default=".", metavar="DIR",
-                   help="writes DIR/<scene>_planted_<N>t_s<S>.toml and .json (default: .)")
+                   help="writes DIR/<scene>_planted_<N>t_s<S>[_<P>p].toml and .json (default: .)")
     _add_json(s)
     s.set_defaults(func=cmd_planted)
 

@@ -77,6 +77,17 @@ def problem_arrays(problem: Problem, x: np.ndarray, ac: np.ndarray, tau: np.ndar
     }
 
 
+def pose_arrays(problem: Problem, xs: np.ndarray, acs: np.ndarray, taus: np.ndarray) -> dict:
+    """The export's per-pose arrays (DESIGN.md section 6): ``pose_names`` (P,),
+    ``target_pose`` (t,) (the pose of each target), ``pose_x`` (P, n, 2) m,
+    ``pose_ac`` (P, f) m, ``pose_tau`` (P, f) N and the union tension ``tau_union``
+    (f,) N; ``x``, ``ac`` and ``tau`` are those of pose 0."""
+    from .objectives import union_tension
+    return {"pose_names": np.array(problem.pose_names), "target_pose": problem.target_pose,
+            "pose_x": np.asarray(xs, dtype=float), "pose_ac": np.asarray(acs, dtype=float),
+            "pose_tau": np.asarray(taus, dtype=float), "tau_union": union_tension(taus)[0]}
+
+
 def write_export(path: str | Path, problem: Problem, x: np.ndarray, ac: np.ndarray,
                  tau: np.ndarray, **extra) -> Path:
     """Write the problem export to ``path`` (.npz); ``extra`` arrays are added."""

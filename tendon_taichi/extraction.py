@@ -39,7 +39,10 @@ class PluginError(TendonError):
 class IdealizedState:
     """What an extractor works from: fiber tensions ``tau`` (f,) N and contractions
     ``ac`` (f,) m of one stage, the equilibrium ``x`` (n, 2) m, and the tension
-    above which a fiber counts as active, ``active_threshold`` (N)."""
+    above which a fiber counts as active, ``active_threshold`` (N). With several
+    target poses, ``tau`` is the union tension sqrt(sum_p tau_p^2), ``ac`` the
+    largest contraction over the poses, ``x`` the first pose's equilibrium, and
+    ``poses`` holds each pose's own state."""
 
     tau: np.ndarray
     ac: np.ndarray
@@ -47,6 +50,7 @@ class IdealizedState:
     active_threshold: float
     stage: int = 0
     k: float | None = None
+    poses: list["IdealizedState"] | None = None
 
     @property
     def active(self) -> np.ndarray:

@@ -18,7 +18,17 @@ through one adjoint solve.
   over the fiber nodes ``v`` outside the clamped band, ``T1 >= T2 >= ...`` the
   tensions of the fibers meeting at ``v``: zero inside a clean strand (two equal
   tensions), positive at a strand's end, a star or a tension jump - so each
-  extra tendon costs, and hinges of short fibers become expensive.
+  extra tendon costs, and hinges of short fibers become expensive;
+* ``effort``: ``O_eff = w_eff sum_i (a0_i / L) tau_i / tau_ref``, the actuation
+  effort (tension times length): antagonist fibers pulling against each other
+  (co-contraction) cost, so fibers that need not pull are paid out.
+
+Several poses (a scene's ``[[poses]]``): each pose ``p`` has its own
+contractions and equilibrium; ``pose`` and ``contraction`` are summed over the
+poses, while the layout terms (``sparsity``, ``continuity``, ``strand_end``)
+act on the union tension ``tau_u = sqrt(sum_p tau_p^2)`` - a fiber is active if
+it is active in any pose, and a strand keeps one tension in each pose. With
+one pose ``tau_u = tau``.
 """
 
 from __future__ import annotations
@@ -42,14 +52,30 @@ class TermValue:
     dac: np.ndarray | None = None
 
 
+#: the terms that act on the union of the poses (the layout) rather than on each pose
+UNION_TERMS = ("sparsity", "continuity", "strand_end")
+
+
 @dataclass
 class State:
     """An equilibrium to evaluate terms at: positions ``x`` (n, 2), contractions
-    ``ac`` (C,) m, tensions ``tau`` (C,) N."""
+    ``ac`` (C,) m, tensions ``tau`` (C,) N, of pose number ``pose``."""
 
     x: np.ndarray
     ac: np.ndarray
     tau: np.ndarray
+    pose: int = 0
+
+
+def union_tension(taus: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The union tension ``tau_u = sqrt(sum_p tau_p^2)`` (C,) of per-pose tensions
+    ``taus`` (P, C), N, and its derivative d tau_u / d tau_p (P, C) (0 where all
+    are slack). One pose: ``tau_u = tau`` and derivative 1, exactly."""
+    taus = np.asarray(taus, dtype=float)
+    if len(taus) == 1:
+        return taus[0], np.ones_like(taus)
+    tu = np.sqrt((taus * taus).sum(axis=0))
+    return tu, np.divide(taus, tu, out=np.zeros_like(taus), where=tu > 0)
 
 
 class Term(Protocol):
@@ -69,16 +95,16 @@ def smoothstep(t: np.ndarray, k: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 class PoseTerm:
-    """O_pos = sum_p |x_p - goal_p|^2 / L^2."""
+    """O_pos = sum_p |x_p - goal_p|^2 / L^2 over the targets of the state's pose."""
 
     name = "pose"
 
     def __init__(self, problem: Problem):
-        self.problem = problem
+        self.poses = [problem.pose(i) for i in range(problem.n_poses)]
         self.L2 = problem.size ** 2
 
     def evaluate(self, state: State) -> TermValue:
-        p = self.problem
+        p = self.poses[state.pose]
         diff = p.target_positions(state.x) - p.target_goal  # (t, 2)
         dx = np.zeros_like(state.x)
         corners = p.mesh.triangles[p.target.tri]  # (t, 3)
@@ -134,6 +160,18 @@ class ContractionTerm:
         return TermValue(float(self.weight * np.dot(r, r)), dac=2.0 * self.weight * r / self.a0)
 
 
+class EffortTerm:
+    """O_eff = weight sum_i (a0_i / L) tau_i / tau_ref (per pose)."""
+
+    name = "effort"
+
+    def __init__(self, problem: Problem, weight: float, tension_scale: float):
+        self.c = weight * problem.fibers.a0 / (problem.size * tension_scale)
+
+    def evaluate(self, state: State) -> TermValue:
+        return TermValue(float(np.dot(self.c, state.tau)), dtau=self.c.copy())
+
+
 class StrandEndTerm:
     """O_end = weight sum_v ((T1 - T2)^2 + (T3 + ...)^2) / tau_ref^2 over fiber nodes
     away from the clamped band (a node whose triangle has a clamped corner does not
@@ -174,8 +212,9 @@ class StrandEndTerm:
 
 @dataclass
 class Evaluation:
-    """The summed objective at a state: ``total``, ``terms`` (value per name), and the
-    summed partials ``dx`` (n, 2), ``dtau`` (C,), ``dac`` (C,)."""
+    """The summed objective at the poses' states: ``total``, ``terms`` (value per
+    name), and the summed partials per pose ``dx`` (P, n, 2), ``dtau`` (P, C) and
+    ``dac`` (P, C)."""
 
     total: float
     terms: dict[str, float]
@@ -195,21 +234,29 @@ class Objective:
     def term(self, name: str):
         return next(t for t in self.terms if t.name == name)
 
-    def evaluate(self, state: State) -> Evaluation:
-        n, C = state.x.shape[0], state.tau.shape[0]
-        dx, dtau, dac = np.zeros((n, 2)), np.zeros(C), np.zeros(C)
+    def evaluate(self, states: list[State]) -> Evaluation:
+        """At one state per pose: the union terms see the union tension (chained back
+        to each pose's tensions), the others are summed over the poses."""
+        P, n, C = len(states), states[0].x.shape[0], states[0].tau.shape[0]
+        dx, dtau, dac = np.zeros((P, n, 2)), np.zeros((P, C)), np.zeros((P, C))
+        tu, dtu = union_tension([s.tau for s in states])
         values, total = {}, 0.0
         for t in self.terms:
             if t.name not in self.active:
                 values[t.name] = 0.0
                 continue
-            tv = t.evaluate(state)
-            values[t.name] = tv.value
-            total += tv.value
-            if tv.dx is not None:
-                dx += tv.dx
-            if tv.dtau is not None:
-                dtau += tv.dtau
-            if tv.dac is not None:
-                dac += tv.dac
+            if t.name in UNION_TERMS:
+                tv = t.evaluate(State(states[0].x, states[0].ac, tu))
+                values[t.name] = tv.value
+                if tv.dtau is not None:
+                    dtau += tv.dtau * dtu
+            else:
+                values[t.name] = 0.0
+                for p, s in enumerate(states):
+                    tv = t.evaluate(s)
+                    values[t.name] += tv.value
+                    for acc, part in ((dx, tv.dx), (dtau, tv.dtau), (dac, tv.dac)):
+                        if part is not None:
+                            acc[p] += part
+            total += values[t.name]
         return Evaluation(total, values, dx, dtau, dac)

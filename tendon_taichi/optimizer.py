@@ -14,6 +14,10 @@ continuity, and re-optimizes from the previous stage's ``r``. The schedule
 stops when the active set has not changed over two stages or ``k < k_min``.
 Every stage starts from the equilibrium solved from rest, so a stage depends
 only on its starting ``r``: a resumed run repeats an uninterrupted one exactly.
+
+Several poses: ``r`` stacks one ratio vector per pose, each pose has its own
+equilibrium and adjoint solve, and the layout terms see the union tension
+(:mod:`~tendon_taichi.objectives`).
 """
 
 from __future__ import annotations
@@ -26,8 +30,8 @@ import scipy.optimize as so
 
 from .errors import ConvergenceError
 from .model import Model
-from .objectives import (ContinuityTerm, ContractionTerm, Evaluation, Objective, PoseTerm,
-                         SparsityTerm, State, StrandEndTerm)
+from .objectives import (ContinuityTerm, ContractionTerm, EffortTerm, Evaluation, Objective, PoseTerm,
+                         SparsityTerm, State, StrandEndTerm, union_tension)
 from .problem import Problem
 from .scene import OptimizeSettings
 from .solvers import Equilibrium, NewtonSolver
@@ -49,9 +53,11 @@ def state_solver(model: Model, linear) -> NewtonSolver:
 
 @dataclass
 class Figures:
-    """What a state achieves: pose error (m, root of summed squares), relative to L,
-    worst single target (m), active fibers (tau > threshold), their rest length (m),
-    the largest tension (N), and the objective terms."""
+    """What a state achieves: pose error (m, root of summed squares over every
+    pose's targets), relative to L, worst single target (m), active fibers (union
+    tension > threshold), their rest length (m), the largest tension (N), the
+    objective terms, and with several poses ``poses``: per pose its ``name``,
+    ``pose_error``, ``pose_error_rel`` and ``pose_error_max``."""
 
     pose_error: float
     pose_error_rel: float
@@ -60,19 +66,41 @@ class Figures:
     active_length: float
     tau_max: float
     objective: dict[str, float]
+    poses: list[dict] | None = None
 
     def as_dict(self) -> dict:
-        return {"pose_error": self.pose_error, "pose_error_rel": self.pose_error_rel,
-                "pose_error_max": self.pose_error_max, "active_fibers": self.active_fibers,
-                "active_length": self.active_length, "tau_max": self.tau_max,
-                "objective": dict(self.objective)}
+        out = {"pose_error": self.pose_error, "pose_error_rel": self.pose_error_rel,
+               "pose_error_max": self.pose_error_max, "active_fibers": self.active_fibers,
+               "active_length": self.active_length, "tau_max": self.tau_max,
+               "objective": dict(self.objective)}
+        if self.poses is not None:
+            out["poses"] = [dict(p) for p in self.poses]
+        return out
+
+
+def pose_errors(problem: Problem, xs) -> tuple[float, float, list[dict] | None]:
+    """Root of the summed squared target distances over every pose (m), the worst
+    single target (m), and (several poses) the same per pose, for one equilibrium
+    ``xs[p]`` (n, 2) per pose."""
+    rows, errs = [], []
+    for i, x in enumerate(xs):
+        pp = problem.pose(i)
+        err = np.linalg.norm(pp.target_positions(x) - pp.target_goal, axis=1)
+        errs.append(err)
+        pe = float(np.sqrt((err ** 2).sum()))
+        rows.append({"name": problem.pose_names[i], "pose_error": pe, "pose_error_rel": pe / problem.size,
+                     "pose_error_max": float(err.max())})
+    err = np.concatenate(errs)
+    return float(np.sqrt((err ** 2).sum())), float(err.max()), rows if len(xs) > 1 else None
 
 
 @dataclass
 class StageResult:
     """One completed stage: its ``k`` (None for stage 0), L-BFGS-B iterations and
-    evaluations, wall time, figures, and the final state (``r``, ``ac`` m, ``tau`` N,
-    ``x`` (n, 2) m; None for a stage read back from a recording)."""
+    evaluations, wall time, figures, and the final state: ``r`` and ``ac`` (m),
+    (P C,) - the contractions of pose 0, then pose 1, ... -, the union tension
+    ``tau`` (C,) N, and the per-pose equilibria ``xs`` (P, n, 2) m and tensions
+    ``taus`` (P, C) N (``xs`` None for a stage read back from a recording)."""
 
     stage: int
     k: float | None
@@ -83,8 +111,14 @@ class StageResult:
     r: np.ndarray
     ac: np.ndarray
     tau: np.ndarray
-    x: np.ndarray | None
+    xs: np.ndarray | None
+    taus: np.ndarray | None = None
     message: str = ""
+
+    @property
+    def x(self) -> np.ndarray | None:
+        """The equilibrium of the first pose (the only one, for most scenes), (n, 2) m."""
+        return None if self.xs is None else self.xs[0]
 
     def summary(self) -> dict:
         return {"stage": self.stage, "k": self.k, "iterations": self.iterations,
@@ -93,145 +127,178 @@ class StageResult:
 
 @dataclass
 class Iterate:
-    """Passed to progress callbacks once per L-BFGS-B iteration."""
+    """Passed to progress callbacks once per L-BFGS-B iteration: per-pose positions
+    ``xs`` (P, n, 2) and tensions ``taus`` (P, C)."""
 
     stage: int
     k: float | None
     iteration: int
     figures: Figures
-    x: np.ndarray
-    tau: np.ndarray
+    xs: np.ndarray
+    taus: np.ndarray
+
+
+class PoseSolve:
+    """The equilibrium of one pose and its adjoint: a model, its Newton solver with
+    warm starts, and the state of the last solve (``x_last``, the prediction base)."""
+
+    def __init__(self, problem: Problem, solver: str, cables=None):
+        self.problem = problem
+        self.model = Model.from_problem(problem, cables=cables)
+        self.newton = NewtonSolver(self.model, solver, reuse=True)
+        self.linear = self.newton.linear
+        self.state_newton = state_solver(self.model, self.linear)
+        self.lambda_warm = False
+        self.pred = None
+        self.x_last = problem.mesh.nodes
+
+    def restart(self, ac: np.ndarray) -> Equilibrium:
+        """The equilibrium at ``ac`` (m) solved from rest, and a cold adjoint."""
+        self.lambda_warm = False
+        self.pred = None
+        self.linear.reset()
+        return self.state_newton.solve(ac=ac, x0=self.problem.mesh.nodes)
+
+    def _predict(self, ac: np.ndarray) -> np.ndarray | None:
+        """First-order prediction of x*(ac) from the last equilibrium, whose Hessian the
+        adjoint just factorized: x* - H^-1 (d2E/dx dac) (ac - ac_last)."""
+        if self.pred is None:
+            return None
+        x_last, ac_last = self.pred
+        self.pred = None
+        dx = self.linear.approx_solve(self.model.mixed_product(ac - ac_last))
+        return None if dx is None else x_last - dx
+
+    def solve(self, ac: np.ndarray, tol: float) -> Equilibrium:
+        """The equilibrium for ``ac`` (m), warm started from the last one (plus a prediction)."""
+        pred = self._predict(ac)
+        if pred is not None:
+            self.model.set_positions(pred)
+            if self.model.energy() == float("inf"):  # the prediction inverts a triangle
+                self.model.set_positions(self.x_last)
+        try:
+            eq = self.newton.solve(ac=ac, tol=tol)
+        except ConvergenceError:
+            eq = self.newton.solve(ac=ac, x0=self.problem.mesh.nodes, tol=tol)
+        self.x_last = eq.x
+        self.pred = (eq.x, ac)
+        return eq
+
+    def adjoint(self, rhs: np.ndarray) -> np.ndarray:
+        """lambda = H^-1 dO/dx, warm started from the last one (iterative backends)."""
+        lam = self.linear.solve(rhs, tol=ADJOINT_TOL, warm=self.lambda_warm)
+        self.lambda_warm = True
+        return lam
 
 
 class SoftIK:
-    """The objective over ``r = ac / a0`` and its adjoint gradient, on one model.
+    """The objective over ``r = ac / a0`` and its adjoint gradient.
 
-    ``solver``: the linear backend of both the equilibrium and the adjoint
-    (``cg``, ``direct`` or ``auto``). With ``cables`` (the tendons of a
-    realizable robot) instead of the fiber lattice, the objective is the pose and
-    the contraction regularizer only.
+    One :class:`PoseSolve` per pose of the problem; ``r`` stacks the poses'
+    ratios, (P C,). ``solver``: the linear backend of both the equilibrium and
+    the adjoint (``cg``, ``direct`` or ``auto``). With ``cables`` (the tendons of
+    a realizable robot) instead of the fiber lattice, the objective is the pose
+    and the contraction regularizer only.
     """
 
     def __init__(self, problem: Problem, settings: OptimizeSettings, solver: str = "auto",
                  cables=None):
         self.problem, self.settings = problem, settings
-        self.model = Model.from_problem(problem, cables=cables)
-        self.newton = NewtonSolver(self.model, solver, reuse=True)
-        self.linear = self.newton.linear
-        self.state_newton = state_solver(self.model, self.linear)
+        self.poses = [PoseSolve(problem.pose(i), solver, cables) for i in range(problem.n_poses)]
+        self.model = self.poses[0].model
+        self.linear = self.poses[0].linear
         s = settings
+        a0 = problem.fibers.a0 if cables is None else cables.a0
         if cables is None:
-            self.a0 = problem.fibers.a0
             terms = [PoseTerm(problem),
                      SparsityTerm(problem, s.sparsity, s.sparsity_measure, s.homotopy.k0),
                      ContinuityTerm(problem, s.continuity, s.tension_scale, s.continuity_measure),
                      StrandEndTerm(problem, s.strand_end, s.tension_scale),
-                     ContractionTerm(self.a0, s.contraction_reg)]
+                     ContractionTerm(a0, s.contraction_reg),
+                     EffortTerm(problem, s.effort, s.tension_scale)]
         else:
-            self.a0 = cables.a0
-            terms = [PoseTerm(problem), ContractionTerm(self.a0, s.contraction_reg)]
+            terms = [PoseTerm(problem), ContractionTerm(a0, s.contraction_reg)]
+        #: rest lengths (m) per entry of r: a0 once per pose, (P C,)
+        self.a0 = np.tile(a0, problem.n_poses)
+        self.n_cables = len(a0)
         self.objective = Objective(terms)
         self.k: float | None = None
         self.configure(None)
         self.evaluations = 0
         self._last: tuple[np.ndarray, float, np.ndarray, Evaluation, np.ndarray] | None = None
-        self._lambda_warm = False
-        self._pred = None
-        self._x_last = problem.mesh.nodes
         self.eval_tol = EVAL_TOL
 
     # ------------------------------------------------------------ stages
     def configure(self, k: float | None) -> None:
-        """Stage 0 (``k`` None): pose + contraction; else sparsity at ``k`` and the
-        strand terms (continuity, strand ends) too."""
+        """Stage 0 (``k`` None): pose + contraction; else sparsity at ``k``, the
+        strand terms (continuity, strand ends) and the effort too."""
         self.k = k
         active = {"pose", "contraction"}
         if k is not None:
             self.objective.term("sparsity").k = k
-            active |= {"sparsity", "continuity", "strand_end"}
+            active |= {"sparsity", "continuity", "strand_end", "effort"}
         self.objective.active = active
         self._last = None
 
-    def restart(self, r: np.ndarray) -> Equilibrium:
-        """The canonical start of a stage: the equilibrium at ``r`` solved from rest,
-        and a cold adjoint."""
-        self._lambda_warm = False
+    def split(self, v: np.ndarray) -> np.ndarray:
+        """A stacked (P C,) vector as (P, C)."""
+        return np.asarray(v, dtype=float).reshape(len(self.poses), self.n_cables)
+
+    def restart(self, r: np.ndarray) -> list[Equilibrium]:
+        """The canonical start of a stage: each pose's equilibrium at ``r`` solved
+        from rest, and cold adjoints."""
         self._last = None
-        self._pred = None
-        self.linear.reset()
-        return self.state_newton.solve(ac=np.asarray(r, dtype=float) * self.a0, x0=self.problem.mesh.nodes)
+        ac = self.split(np.asarray(r, dtype=float) * self.a0)
+        return [ps.restart(ac[i]) for i, ps in enumerate(self.poses)]
 
     # ------------------------------------------------------------ evaluation
-    def _predict(self, ac: np.ndarray) -> np.ndarray | None:
-        """First-order prediction of x*(ac) from the last equilibrium, whose Hessian the
-        adjoint just factorized: x* - H^-1 (d2E/dx dac) (ac - ac_last)."""
-        if self._pred is None:
-            return None
-        x_last, ac_last = self._pred
-        self._pred = None
-        dx = self.linear.approx_solve(self.model.mixed_product(ac - ac_last))
-        return None if dx is None else x_last - dx
-
-    def _solve(self, r: np.ndarray) -> Equilibrium:
-        """The equilibrium for r, warm started from the last one (plus a prediction)."""
-        ac = np.asarray(r, dtype=float) * self.a0
-        pred = self._predict(ac)
-        if pred is not None:
-            self.model.set_positions(pred)
-            if self.model.energy() == float("inf"):  # the prediction inverts a triangle
-                self.model.set_positions(self._x_last)
-        try:
-            return self.newton.solve(ac=ac, tol=self.eval_tol)
-        except ConvergenceError:
-            return self.newton.solve(ac=ac, x0=self.problem.mesh.nodes, tol=self.eval_tol)
-
     def evaluate(self, r: np.ndarray) -> tuple[float, np.ndarray]:
-        """Objective and its gradient w.r.t. r at the equilibrium for r."""
+        """Objective and its gradient w.r.t. r at the poses' equilibria for r."""
         r = np.array(r, dtype=float)
         if self._last is not None and np.array_equal(r, self._last[0]):
             return self._last[1], self._last[2]
-        eq = self._solve(r)
-        m = self.model
-        ac = r * self.a0
-        cab = m.cable_state()
-        ev = self.objective.evaluate(State(eq.x, ac, cab["tau"]))
-        # the whole x-derivative, through the tensions too, and one adjoint solve
-        dOdx = ev.dx + m.length_jacobian_product(ev.dtau * cab["kc"])
-        dOdx[self.problem.fixed] = 0.0
-        lam = self._adjoint(dOdx)
-        dOdac = ev.dac + ev.dtau * cab["tau_ac"] - m.mixed_transpose_product(lam)
-        self._x_last = eq.x
-        self._pred = (eq.x, ac)
-        grad = dOdac * self.a0
+        ac = self.split(r * self.a0)
+        states, cabs = [], []
+        for i, ps in enumerate(self.poses):
+            eq = ps.solve(ac[i], self.eval_tol)
+            cabs.append(ps.model.cable_state())
+            states.append(State(eq.x, ac[i], cabs[-1]["tau"], i))
+        ev = self.objective.evaluate(states)
+        grad = np.empty((len(self.poses), self.n_cables))
+        for i, (ps, cab) in enumerate(zip(self.poses, cabs)):
+            m = ps.model
+            # the whole x-derivative, through the tensions too, and one adjoint solve
+            dOdx = ev.dx[i] + m.length_jacobian_product(ev.dtau[i] * cab["kc"])
+            dOdx[self.problem.fixed] = 0.0
+            lam = ps.adjoint(dOdx)
+            grad[i] = ev.dac[i] + ev.dtau[i] * cab["tau_ac"] - m.mixed_transpose_product(lam)
+        grad = grad.ravel() * self.a0
         self.evaluations += 1
-        self._last = (r, ev.total, grad, ev, eq.x)
+        self._last = (r, ev.total, grad, ev, np.array([s.x for s in states]))
         return ev.total, grad
-
-    def _adjoint(self, rhs: np.ndarray) -> np.ndarray:
-        """lambda = H^-1 dO/dx, warm started from the last one (iterative backends)."""
-        lam = self.linear.solve(rhs, tol=ADJOINT_TOL, warm=self._lambda_warm)
-        self._lambda_warm = True
-        return lam
 
     def figures(self, r: np.ndarray) -> Figures:
         """Figures at r (evaluated if it is not the last point)."""
         self.evaluate(r)
-        _, _, _, ev, x = self._last
+        _, _, _, ev, xs = self._last
         p = self.problem
-        tau = self.model.tensions()
-        err = np.linalg.norm(p.target_positions(x) - p.target_goal, axis=1)
+        tau = union_tension(self.tensions())[0]
+        pe, worst, rows = pose_errors(p, xs)
         active = active_set(tau, self.settings)
-        pe = float(np.sqrt((err ** 2).sum()))
-        return Figures(pe, pe / p.size, float(err.max()), int(active.sum()),
-                       float(self.a0[active].sum()), float(tau.max()), dict(ev.terms))
+        return Figures(pe, pe / p.size, worst, int(active.sum()),
+                       float(self.a0[:self.n_cables][active].sum()), float(tau.max()), dict(ev.terms), rows)
+
+    def tensions(self) -> np.ndarray:
+        """Per-pose tensions (P, C) of the last solved equilibria, N."""
+        return np.array([ps.model.tensions() for ps in self.poses])
 
     def last_value(self) -> float:
         """The objective at the last evaluated point."""
         return self._last[1]
 
     def state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Positions and tensions of the last evaluated point."""
-        return self._last[4], self.model.tensions()
+        """Per-pose positions (P, n, 2) and tensions (P, C) of the last evaluated point."""
+        return self._last[4], self.tensions()
 
 
 def settled(history: list[tuple[float, bytes]], stage: int, settings: OptimizeSettings) -> bool:
@@ -299,10 +366,10 @@ def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbac
     def callback(intermediate_result):
         r = intermediate_result.x
         fig = ik.figures(r)
-        x, tau = ik.state()
-        history.append((ik.last_value(), active_set(tau, s).tobytes()))
+        xs, taus = ik.state()
+        history.append((ik.last_value(), active_set(union_tension(taus)[0], s).tobytes()))
         for cb in callbacks.on_iteration:
-            cb(Iterate(stage, k, len(history), fig, x, tau))
+            cb(Iterate(stage, k, len(history), fig, xs, taus))
         if settled(history, stage, s):
             raise StopIteration
 
@@ -314,10 +381,10 @@ def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbac
     # the stage's final state, solved from rest (what replay recomputes)
     ik.restart(r)
     fig = ik.figures(r)
-    x, tau = ik.state()
+    xs, taus = ik.state()
     message = "settled" if res.status == 99 or "StopIteration" in str(res.message) else str(res.message)
     out = StageResult(stage, k, int(res.nit), ik.evaluations - ev0, time.perf_counter() - t0, fig,
-                      r, r * ik.a0, tau, x, message)
+                      r, r * ik.a0, union_tension(taus)[0], xs, taus, message)
     for cb in callbacks.on_stage:
         cb(out)
     return out

@@ -36,10 +36,11 @@ def _axes_tensions(ax, problem: Problem, x: np.ndarray, tau: np.ndarray, thresho
     return lc
 
 
-def plot_stages(path: str | Path, problem: Problem, panels: list[tuple[str, np.ndarray, np.ndarray]],
+def plot_stages(path: str | Path, problem: Problem, panels: list[tuple],
                 threshold: float, scale: float) -> Path:
-    """A PNG with one panel per (title, x, tau): fibers coloured by tension (N) over
-    the deformed mesh (grey: rest), targets (blue) and goals (green)."""
+    """A PNG with one panel per (title, x, tau[, pose]): fibers coloured by tension
+    (N) over the deformed mesh (grey: rest), the targets of ``pose`` (default 0)
+    (blue) and their goals (green)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -48,8 +49,8 @@ def plot_stages(path: str | Path, problem: Problem, panels: list[tuple[str, np.n
 
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.0), squeeze=False)
     lc = None
-    for ax, (title, x, tau) in zip(axes[0], panels):
-        lc = _axes_tensions(ax, problem, x, tau, threshold, scale, title)
+    for ax, (title, x, tau, *pose) in zip(axes[0], panels):
+        lc = _axes_tensions(ax, problem.pose(pose[0] if pose else 0), x, tau, threshold, scale, title)
     axes[0][0].legend(loc="lower left", fontsize=7)
     if lc is not None:
         fig.colorbar(lc, ax=list(axes[0]), shrink=0.8, label="fiber tension (N)")
@@ -87,7 +88,8 @@ def plot_compare(path: str | Path, extraction) -> Path:
             ax.plot(path_xy[:, 0], path_xy[:, 1], color=colors[i % len(colors)], lw=2.2)
             ax.plot(*path_xy[0], "o", color=colors[i % len(colors)], ms=4)
             ax.plot(*path_xy[-1], "s", color=colors[i % len(colors)], ms=4)
-        now, goal = p.target_positions(x), p.target_goal
+        first = p.pose(0)  # several poses: the first pose's equilibrium and targets
+        now, goal = first.target_positions(x), first.target_goal
         ax.scatter(goal[:, 0], goal[:, 1], s=40, marker="x", color="tab:green", zorder=5)
         ax.scatter(now[:, 0], now[:, 1], s=18, color="tab:blue", zorder=5)
         m = r.metrics
@@ -250,6 +252,74 @@ def plot_sweep(path: str | Path, result: dict) -> Path:
         fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7)
     fig.suptitle(f"sweep '{result['name']}': {len(cases)} cases (colour: scene; marker: extractor)", fontsize=10)
     fig.tight_layout(rect=(0, 0.02 + 0.02 * ((len(labels) + 2) // 3), 1, 0.97))
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_story(path: str | Path, problem: Problem, planted: dict | None, stage0, final, extractor,
+               threshold: float, scale: float) -> Path:
+    """The method in five panels, for a README: the planted tendons on their
+    equilibrium (``planted``: a layout dict of :mod:`~tendon_taichi.planted`, or
+    None), stage 0 (unregularized soft IK) and the final stage (``(x, tau,
+    figures)`` each) as fiber tensions, one extractor's tendons at rest, and its
+    realizable robot (``extractor``: a :class:`~tendon_taichi.tendons.ExtractorResult`)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .export import atomic_path
+
+    fig, axes = plt.subplots(1, 5, figsize=(19, 4.0))
+    T, X = problem.mesh.triangles, problem.mesh.nodes
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    pose = problem.pose(0)
+
+    def frame(ax, x, title):
+        ax.triplot(X[:, 0], X[:, 1], T, color="0.88", lw=0.4)
+        if x is not None:
+            ax.triplot(x[:, 0], x[:, 1], T, color="0.72", lw=0.4)
+        goal = pose.target_goal
+        ax.scatter(goal[:, 0], goal[:, 1], s=40, marker="x", color="tab:green", zorder=5)
+        if x is not None:
+            now = pose.target_positions(x)
+            ax.scatter(now[:, 0], now[:, 1], s=18, color="tab:blue", zorder=5)
+        ax.set_title(title, fontsize=9)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+
+    ax = axes[0]
+    if planted is not None:
+        frame(ax, None, f"1. planted: {len(planted['tendons'])} tendons, "
+                        f"{100 * planted['planted_length']:.1f} cm\n(at rest; green x: goals they make)")
+        for i, t in enumerate(planted["tendons"]):
+            w = np.array(t["waypoints"])
+            ax.plot(w[:, 0], w[:, 1], color=colors[i % len(colors)], lw=2.2)
+            ax.plot(*w[0], "o", color=colors[i % len(colors)], ms=4)
+    else:
+        frame(ax, None, "1. the body and its goals")
+    for ax, (x, tau, f), title in ((axes[1], stage0, "2. unregularized soft IK (stage 0)"),
+                                   (axes[2], final, "3. L0 homotopy + strand terms (final)")):
+        _axes_tensions(ax, pose, x, tau, threshold, scale,
+                       f"{title}\n{f.active_fibers} active fibers, {100 * f.active_length:.1f} cm, "
+                       f"pose {100 * f.pose_error_rel:.2f}% of L")
+    ax = axes[3]
+    m = extractor.metrics
+    frame(ax, None, f"4. extracted ({extractor.name}): {m['count']} tendons, "
+                    f"{100 * m['total_length']:.1f} cm\n{m['kinks']} kinks, capstan worst {m['capstan_worst']:.2f}")
+    for i, t in enumerate(extractor.tendons):
+        ax.plot(t.waypoints[:, 0], t.waypoints[:, 1], color=colors[i % len(colors)], lw=2.2)
+        ax.plot(*t.waypoints[0], "o", color=colors[i % len(colors)], ms=4)
+        ax.plot(*t.waypoints[-1], "s", color=colors[i % len(colors)], ms=4)
+    ax = axes[4]
+    x = extractor.realizable.x
+    frame(ax, x, f"5. realizable robot (only those tendons)\npose {100 * m['realizable_pose_error_rel']:.2f}% of L")
+    c = problem.fibers.embedding.positions(T, x)
+    for i, t in enumerate(extractor.tendons):
+        ax.plot(c[t.nodes][:, 0], c[t.nodes][:, 1], color=colors[i % len(colors)], lw=2.2)
+    fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)

@@ -7,7 +7,7 @@ graph and the embedded target points (DESIGN.md sections 2 and 6).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -22,7 +22,9 @@ from .scene import Scene
 @dataclass(frozen=True, eq=False)
 class Problem:
     """A scene at resolution ``level``: ``mesh``, ``fixed`` (bool per node),
-    ``fibers``, and targets (``target`` embedding, ``target_goal`` (t, 2), m)."""
+    ``fibers``, and targets (``target`` embedding, ``target_goal`` (t, 2), m) -
+    those of every pose, pose after pose (:attr:`target_pose`); :meth:`pose`
+    gives one pose's problem."""
 
     scene: Scene
     level: int
@@ -52,6 +54,28 @@ class Problem:
         """The fiber lattice as single-segment cables of EA = the scene's stiffness."""
         return CableSet.fibers(self.fibers.embedding, self.fibers.edges, self.fibers.a0,
                                self.scene.fibers.stiffness)
+
+    @property
+    def n_poses(self) -> int:
+        return len(self.scene.poses)
+
+    @property
+    def pose_names(self) -> list[str]:
+        return [p.name for p in self.scene.poses]
+
+    @property
+    def target_pose(self) -> np.ndarray:
+        """int (t,): the pose each target belongs to."""
+        return self.scene.target_pose
+
+    def pose(self, i: int) -> "Problem":
+        """The problem of pose ``i`` alone (same mesh and fibers, that pose's targets)."""
+        if self.n_poses == 1:
+            return self
+        sel = self.target_pose == i
+        return replace(self, scene=replace(self.scene, poses=(self.scene.poses[i],)),
+                       target=Embedding(self.target.tri[sel], self.target.bary[sel]),
+                       target_goal=self.target_goal[sel])
 
     def target_positions(self, x: np.ndarray) -> np.ndarray:
         """Where the target points are (t, 2) for node positions ``x`` (n, 2)."""
@@ -97,6 +121,6 @@ def build_problem(scene: Scene, level: int = 1) -> Problem:
     outside = np.flatnonzero(dist > tol)
     if len(outside):
         i = int(outside[0])
-        raise SceneError(f"{scene.origin}: targets[{i}].point {tuple(points[i])} lies outside the body")
+        raise SceneError(f"{scene.origin}: {scene.target_label(i)}.point {tuple(points[i])} lies outside the body")
     goals = np.array([t.goal for t in scene.targets], dtype=float)
     return Problem(scene, int(level), mesh, fixed, fibers, target, goals)

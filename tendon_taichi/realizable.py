@@ -36,6 +36,7 @@ class RealizableResult:
     iterations: int
     evaluations: int
     time_s: float
+    poses: list["RealizableResult"] | None = None
 
 
 def tendon_cables(problem: Problem, tendons: list[Tendon]) -> CableSet:
@@ -54,25 +55,53 @@ def tendon_cables(problem: Problem, tendons: list[Tendon]) -> CableSet:
                     np.array(start, dtype=np.int64), a0, np.full(len(tendons), problem.scene.fibers.stiffness))
 
 
-def warm_ratios(problem: Problem, tendons: list[Tendon], state: IdealizedState) -> np.ndarray:
+def warm_ratios(problem: Problem, tendons: list[Tendon], state: IdealizedState,
+                tensions=None) -> np.ndarray:
     """Starting c / L0 per tendon: the contraction that gives the tendon its source
-    strand's mean tension at the idealized equilibrium (Z'(e) = tau / EA)."""
+    strand's mean tension (or ``tensions`` (T,) N) at the idealized equilibrium
+    (Z'(e) = tau / EA)."""
     fs = problem.scene.fibers
     EA, eps = fs.stiffness, fs.eps
     c = problem.fibers.embedding.positions(problem.mesh.triangles, state.x) if state.x is not None \
         else problem.fibers.nodes
+    tensions = [t.tension for t in tendons] if tensions is None else tensions
     out = []
-    for t in tendons:
+    for t, tension in zip(tendons, tensions):
         L = float(np.linalg.norm(np.diff(c[t.nodes], axis=0), axis=1).sum())
-        z1 = max(t.tension, 0.0) / EA
+        z1 = max(tension, 0.0) / EA
         e = z1 + 0.5 * eps if z1 >= 0.5 * eps else np.sqrt(2.0 * eps * z1)
         out.append((t.length - L / (1.0 + e)) / t.length)
     return np.clip(np.array(out), -fs.max_payout, fs.max_contraction)
 
 
+def solve_realizable_poses(problem: Problem, tendons: list[Tendon], state: IdealizedState,
+                           settings: OptimizeSettings, solver: str = "auto") -> RealizableResult:
+    """The realizable robot in every target pose: one layout, its tendon contractions
+    re-solved per pose (warm started from each tendon's mean tension in that pose).
+    With several poses the result's pose errors cover every pose's targets,
+    ``contraction``, ``ratios`` and ``tau`` are (P, T), ``x`` is the first pose's
+    and ``poses`` holds each pose's result."""
+    if problem.n_poses == 1:
+        return solve_realizable(problem, tendons, state, settings, solver)
+    t0 = time.perf_counter()
+    res = []
+    for i, st in enumerate(state.poses):
+        tensions = [float(st.tau[t.fibers].mean()) for t in tendons]
+        res.append(solve_realizable(problem.pose(i), tendons, st, settings, solver, tensions))
+    err = np.array([r.pose_error for r in res])
+    pe = float(np.sqrt((err ** 2).sum()))
+    shape = (len(res), len(tendons))
+    return RealizableResult(np.array([r.contraction for r in res]).reshape(shape),
+                            np.array([r.ratios for r in res]).reshape(shape),
+                            np.array([r.tau for r in res]).reshape(shape), res[0].x, pe, pe / problem.size,
+                            max(r.pose_error_max for r in res), sum(r.iterations for r in res),
+                            sum(r.evaluations for r in res), time.perf_counter() - t0, res)
+
+
 def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedState,
-                     settings: OptimizeSettings, solver: str = "auto") -> RealizableResult:
-    """Solve the realizable robot's tendon contractions for the problem's targets."""
+                     settings: OptimizeSettings, solver: str = "auto", tensions=None) -> RealizableResult:
+    """Solve the realizable robot's tendon contractions for the problem's targets
+    (one pose), warm started from :func:`warm_ratios`."""
     t0 = time.perf_counter()
     L = problem.size
     if not tendons:  # the bare body (it sags under gravity, if any)
@@ -82,7 +111,7 @@ def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedSt
         return RealizableResult(np.zeros(0), np.zeros(0), np.zeros(0), x, pe, pe / L, float(err.max()),
                                 0, 0, time.perf_counter() - t0)
     ik = SoftIK(problem, settings, solver, cables=tendon_cables(problem, tendons))
-    st = run_stage(ik, 0, warm_ratios(problem, tendons, state), RunCallbacks())
+    st = run_stage(ik, 0, warm_ratios(problem, tendons, state, tensions), RunCallbacks())
     err = np.linalg.norm(problem.target_positions(st.x) - problem.target_goal, axis=1)
     return RealizableResult(st.ac, st.r, st.tau, st.x, st.figures.pose_error, st.figures.pose_error_rel,
                             float(err.max()), st.iterations, st.evaluations, time.perf_counter() - t0)

@@ -10,10 +10,12 @@ iteration counted over the whole run):
   ``/world/rest_fibers`` (the fiber graph);
 * per logged iteration: ``/world/mesh`` (deformed edges), ``/world/fibers``
   (coloured by tension on a fixed scale, slack fibers faint), ``/world/targets``,
-  ``/world/goals``, and scalars ``/metrics/objective/<term>``,
-  ``/metrics/pose_error_rel``, ``/metrics/active_fibers``, ``/metrics/k``;
-* per completed stage (then flushed to disk): ``/stages/ac``, ``/stages/r``,
-  ``/stages/tau`` (f64 tensors, bit-exact) and ``/stages/summary`` (JSON).
+  ``/world/goals`` (with several poses: the same under ``/world/poses/<name>/``),
+  and scalars ``/metrics/objective/<term>``, ``/metrics/pose_error_rel``,
+  ``/metrics/active_fibers``, ``/metrics/k``;
+* per completed stage (then flushed to disk): ``/stages/ac``, ``/stages/r``
+  (the poses' vectors one after the other, (P f,)), ``/stages/tau`` (the union
+  tension, (f,); f64 tensors, bit-exact) and ``/stages/summary`` (JSON).
   A stage counts as completed when its summary is in the file.
 """
 
@@ -125,10 +127,11 @@ class Recorder:
         self.rec.send_chunks(chunks)
         self.rec.flush()
 
-    def iteration(self, step: int, stage: int, k: float | None, figures, x: np.ndarray,
-                  tau: np.ndarray, force: bool = False) -> None:
-        """Log one L-BFGS-B iteration (``step`` counts over the whole run)."""
-        rr, rec, p = self.rr, self.rec, self.problem
+    def iteration(self, step: int, stage: int, k: float | None, figures, xs: np.ndarray,
+                  taus: np.ndarray, force: bool = False) -> None:
+        """Log one L-BFGS-B iteration (``step`` counts over the whole run) with the
+        per-pose positions ``xs`` (P, n, 2) and tensions ``taus`` (P, C)."""
+        rr, rec = self.rr, self.rec
         rec.set_time("stage", sequence=stage)
         rec.set_time("iteration", sequence=step)
         for name, value in figures.objective.items():
@@ -138,15 +141,22 @@ class Recorder:
         rec.log("/metrics/figures/k", rr.Scalars(float(k) if k is not None else float("nan")))
         if not force and step % self.log_every:
             return
-        rec.log("/world/mesh", rr.LineStrips2D(x[self.edges].astype(np.float32),
-                                               colors=[(120, 140, 170, 90)], radii=-0.5))
+        names = self.problem.pose_names
+        for i, (x, tau) in enumerate(zip(xs, taus)):
+            self._body(f"/world/poses/{names[i]}" if len(names) > 1 else "/world", self.problem.pose(i), x, tau)
+
+    def _body(self, base: str, p: Problem, x: np.ndarray, tau: np.ndarray) -> None:
+        """The deformed mesh, fibers by tension, targets and goals of one pose under ``base``."""
+        rr, rec = self.rr, self.rec
+        rec.log(f"{base}/mesh", rr.LineStrips2D(x[self.edges].astype(np.float32),
+                                                colors=[(120, 140, 170, 90)], radii=-0.5))
         c = p.fibers.embedding.positions(p.mesh.triangles, x)
         strips = c[p.fibers.edges].astype(np.float32)
         thr = self.settings.active_threshold * self.settings.tension_scale
-        rec.log("/world/fibers", rr.LineStrips2D(strips, colors=tension_colors(tau, self.settings.tension_scale, thr),
-                                                 radii=-1.5))
-        rec.log("/world/targets", rr.Points2D(p.target_positions(x), colors=[(40, 120, 255)], radii=-4.0))
-        rec.log("/world/goals", rr.Points2D(p.target_goal, colors=[(40, 200, 80)], radii=-4.0))
+        rec.log(f"{base}/fibers", rr.LineStrips2D(strips, colors=tension_colors(tau, self.settings.tension_scale,
+                                                                                thr), radii=-1.5))
+        rec.log(f"{base}/targets", rr.Points2D(p.target_positions(x), colors=[(40, 120, 255)], radii=-4.0))
+        rec.log(f"{base}/goals", rr.Points2D(p.target_goal, colors=[(40, 200, 80)], radii=-4.0))
 
     def stage(self, result, step: int) -> None:
         """Log a completed stage losslessly and flush it to disk."""

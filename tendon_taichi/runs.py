@@ -13,11 +13,12 @@ import numpy as np
 
 from . import __version__
 from .errors import InputError, Stopped
-from .export import write_export
+from .export import pose_arrays, write_export
 from .plots import plot_stages
 from .model import Model
-from .optimizer import (Iterate, RunCallbacks, SoftIK, StageResult, active_set, run_schedule,
-                        state_solver)
+from .objectives import union_tension
+from .optimizer import (Iterate, RunCallbacks, SoftIK, StageResult, active_set, pose_errors,
+                        run_schedule, state_solver)
 from .problem import Problem, build_problem
 from .recording import Recorder, RecordingError, completed_chunks, read_recording, settings_dict
 from .scene import Scene
@@ -108,9 +109,9 @@ def _recorded_stage(rs, problem: Problem) -> StageResult:
     from .optimizer import Figures
     s = rs.summary
     fig = Figures(s["pose_error"], s["pose_error_rel"], s["pose_error_max"], s["active_fibers"],
-                  s["active_length"], s["tau_max"], s["objective"])
+                  s["active_length"], s["tau_max"], s["objective"], s.get("poses"))
     return StageResult(s["stage"], s["k"], s["iterations"], s["evaluations"], s["time_s"], fig,
-                       rs.r, rs.ac, rs.tau, None, s.get("message", ""))
+                       rs.r, rs.ac, rs.tau, None, message=s.get("message", ""))
 
 
 def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | Path | None = None,
@@ -151,14 +152,14 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
 
     def on_iteration(it: Iterate):
         step[0] += 1
-        recorder.iteration(step[0], it.stage, it.k, it.figures, it.x, it.tau)
+        recorder.iteration(step[0], it.stage, it.k, it.figures, it.xs, it.taus)
         progress.iteration(it)
 
     def on_stage_start(stage, k):
         progress.stage_start(stage, k, settings.stage_iterations)
 
     def on_stage(st: StageResult):
-        recorder.iteration(step[0], st.stage, st.k, st.figures, st.x, st.tau, force=True)
+        recorder.iteration(step[0], st.stage, st.k, st.figures, st.xs, st.taus, force=True)
         recorder.stage(st, step[0])
         if tmp is not None:
             _promote(tmp)
@@ -178,11 +179,13 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
         _promote(tmp)
     final, s0 = stages[-1], stages[0]
     for st in (s0, final):  # stages read back from a recording carry no positions
-        if st.x is None:
+        if st.xs is None:
             ik.configure(st.k)
-            st.x = ik.restart(st.r).x
-    write_export(export, problem, final.x, final.ac, final.tau, ac_stage0=s0.ac, tau_stage0=s0.tau,
-                 r_final=final.r)
+            eqs = ik.restart(st.r)
+            st.xs, st.taus = np.array([eq.x for eq in eqs]), np.array([eq.tau for eq in eqs])
+    write_export(export, problem, final.x, ik.split(final.ac)[0], final.taus[0], ac_stage0=s0.ac,
+                 tau_stage0=s0.tau, r_final=final.r, **pose_arrays(problem, final.xs, ik.split(final.ac),
+                                                                   final.taus))
     warnings = []
     if s0.figures.pose_error_rel > UNREACHED:
         warnings.append(f"the goals are out of reach: even unregularized soft IK leaves a pose "
@@ -196,10 +199,14 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
         extra["resumed_from"] = str(resume)
     if png is not None:
         png = record.with_suffix(".png") if str(png) == "-" else Path(png)
-        plot_stages(png, problem, [(f"stage 0 (unregularized): {s0.figures.active_fibers} active", s0.x, s0.tau),
-                                   (f"final stage {final.stage}: {final.figures.active_fibers} active",
-                                    final.x, final.tau)],
-                    settings.active_threshold * settings.tension_scale, settings.tension_scale)
+        panels = [(f"stage 0 (unregularized): {s0.figures.active_fibers} active", s0.x, s0.tau)]
+        names = problem.pose_names
+        for i in range(problem.n_poses):
+            what = f"final stage {final.stage}" + (f", pose '{names[i]}'" if len(names) > 1 else "")
+            panels.append((f"{what}: {int(active_set(final.taus[i], settings).sum())} active",
+                           final.xs[i], final.taus[i], i))
+        plot_stages(png, problem, panels, settings.active_threshold * settings.tension_scale,
+                    settings.tension_scale)
         extra["png"] = str(png)
     summary = _summary(problem, solver, stages, record, export, t0, ik, extra)
     return RunResult(problem, stages, summary, record, export, warnings)
@@ -247,14 +254,19 @@ def replay(path: str | Path, stage: int | None = None, solver: str = "recorded",
     model = Model.from_problem(problem)
     newton = state_solver(model, run.meta.get("solver", "auto") if solver == "recorded" else solver)
     rows, states = [], {}
+
+    def solve(rs):
+        """Each pose's equilibrium from rest: positions (P, n, 2), union tension (f,)."""
+        eqs = [newton.solve(ac=ac, x0=problem.mesh.nodes) for ac in rs.ac.reshape(problem.n_poses, -1)]
+        return np.array([eq.x for eq in eqs]), union_tension([eq.tau for eq in eqs])[0]
+
     for k, rs in enumerate(run.stages):
         if stage is not None and k != stage:
             continue
-        eq = newton.solve(ac=rs.ac, x0=problem.mesh.nodes)
-        states[k] = (eq.x, eq.tau)
-        err = np.linalg.norm(problem.target_positions(eq.x) - problem.target_goal, axis=1)
-        pe = float(np.sqrt((err ** 2).sum()))
-        act = active_set(eq.tau, settings)
+        xs, tau = solve(rs)
+        states[k] = (xs[0], tau)
+        pe = pose_errors(problem, xs)[0]
+        act = active_set(tau, settings)
         rec = rs.summary
         rel = abs(pe - rec["pose_error"]) / max(abs(rec["pose_error"]), 1e-300)
         ok = rel <= tol and int(act.sum()) == rec["active_fibers"]
@@ -269,8 +281,8 @@ def replay(path: str | Path, stage: int | None = None, solver: str = "recorded",
         first = 0 if stage is None else stage
         last = max(states)
         if 0 not in states:
-            eq = newton.solve(ac=run.stages[0].ac, x0=problem.mesh.nodes)
-            states[0] = (eq.x, eq.tau)
+            xs, tau = solve(run.stages[0])
+            states[0] = (xs[0], tau)
         panels = [(f"stage {k}{' (unregularized)' if k == 0 else ''}: "
                    f"{int(active_set(states[k][1], settings).sum())} active", *states[k])
                   for k in sorted({0, first, last})]

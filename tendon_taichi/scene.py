@@ -19,9 +19,12 @@ optional unless marked *required*; the defaults below are the documented ones.
 ``[[fixed]]`` (*required*, one or more)
     ``box = [[xmin, ymin], [xmax, ymax]]``: nodes inside (edges included) are
     clamped.
-``[[targets]]`` (*required*, one or more)
+``[[targets]]`` (*required*, one or more, unless ``[[poses]]``)
     ``point = [x, y]`` a material point of the body, ``goal = [x, y]`` where
     it should go, m.
+``[[poses]]`` (instead of ``[[targets]]``: several target poses at once)
+    ``name`` (default ``pose<i>``) and ``[[poses.targets]]`` as above. Each pose
+    gets its own contractions; one tendon layout serves them all.
 ``[optimize]``
     See :class:`OptimizeSettings`.
 """
@@ -105,6 +108,14 @@ class Target:
 
 
 @dataclass(frozen=True)
+class Pose:
+    """A named target pose: the material points and goals to reach at once."""
+
+    name: str
+    targets: tuple[Target, ...]
+
+
+@dataclass(frozen=True)
 class Homotopy:
     """The L0 homotopy schedule: k0, k <- k * factor per stage, stop below k_min (N)."""
 
@@ -118,7 +129,7 @@ class OptimizeSettings:
     """Weights and schedule of the regularized soft IK (DESIGN.md section 3).
 
     ``sparsity`` w_sp, ``continuity`` w_ct, ``strand_end`` w_end,
-    ``contraction_reg`` w_ac (dimensionless weights); ``tension_scale`` tau_ref (N);
+    ``contraction_reg`` w_ac, ``effort`` w_eff (dimensionless weights); ``tension_scale`` tau_ref (N);
     ``initial_contraction`` r0 (ratio of rest length); ``active_threshold``
     (x tau_ref); ``sparsity_measure`` and ``continuity_measure`` are
     ``"length"`` (resolution independent, default) or ``"count"`` (the
@@ -131,6 +142,7 @@ class OptimizeSettings:
     sparsity: float = 1.0e-4
     continuity: float = 2.5e-5
     strand_end: float = 1.0e-4
+    effort: float = 0.0
     contraction_reg: float = 1.0e-6
     tension_scale: float = 1.0
     initial_contraction: float = 0.005
@@ -151,10 +163,28 @@ class Scene:
     body: Body
     fibers: FiberSettings
     fixed: tuple[Box, ...]
-    targets: tuple[Target, ...]
+    poses: tuple[Pose, ...]
     optimize: OptimizeSettings
     source: str
     origin: str  # a file path, or "builtin:<name>"
+
+    @property
+    def targets(self) -> tuple[Target, ...]:
+        """Every pose's targets, pose after pose."""
+        return tuple(t for p in self.poses for t in p.targets)
+
+    @property
+    def target_pose(self) -> np.ndarray:
+        """int (t,): the pose each of :attr:`targets` belongs to."""
+        return np.repeat(np.arange(len(self.poses)), [len(p.targets) for p in self.poses])
+
+    def target_label(self, i: int) -> str:
+        """How the scene file names target ``i`` of :attr:`targets` (for messages)."""
+        if len(self.poses) == 1:
+            return f"targets[{i}]"
+        p = int(self.target_pose[i])
+        first = sum(len(q.targets) for q in self.poses[:p])
+        return f"poses[{p}].targets[{i - first}]"
 
     def with_optimize(self, **changes) -> "Scene":
         """A copy with some optimize settings replaced (CLI overrides)."""
@@ -319,6 +349,7 @@ def _read_optimize(r: _Reader, fibers: FiberSettings) -> OptimizeSettings:
         sparsity=r.number("sparsity", d.sparsity, ge=0.0),
         continuity=r.number("continuity", d.continuity, ge=0.0),
         strand_end=r.number("strand_end", d.strand_end, ge=0.0),
+        effort=r.number("effort", d.effort, ge=0.0),
         contraction_reg=r.number("contraction_reg", d.contraction_reg, ge=0.0),
         tension_scale=r.number("tension_scale", d.tension_scale, gt=0.0),
         initial_contraction=r.number("initial_contraction", d.initial_contraction,
@@ -335,12 +366,12 @@ def _read_optimize(r: _Reader, fibers: FiberSettings) -> OptimizeSettings:
     return opt
 
 
-def _array_of_tables(doc: _Reader, key: str) -> list[dict]:
+def _array_of_tables(doc: _Reader, key: str, prefix: str = "") -> list[dict]:
     if not doc.has(key):
-        raise SceneError(f"{doc.origin}: at least one [[{key}]] entry is required")
+        raise SceneError(f"{doc.origin}: at least one [[{prefix}{key}]] entry is required")
     items = doc.raw(key)
     if not isinstance(items, list) or not items:
-        raise SceneError(f"{doc.origin}: [[{key}]] must be a non-empty array of tables")
+        raise SceneError(f"{doc.origin}: [[{prefix}{key}]] must be a non-empty array of tables")
     return items
 
 
@@ -376,16 +407,40 @@ def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None
         r.finish()
         fixed.append(Box(lo, hi))
 
-    targets = []
-    for i, item in enumerate(_array_of_tables(doc, "targets")):
-        r = _Reader(item, f"targets[{i}]", origin)
-        targets.append(Target(r.point("point", required=True), r.point("goal", required=True)))
-        r.finish()
-
+    poses = _read_poses(doc)
     opt = _read_optimize(_Reader(doc.raw("optimize") if doc.has("optimize") else {},
                                  "optimize", origin), fibers)
     doc.finish()
-    return Scene(name, body, fibers, tuple(fixed), tuple(targets), opt, text, origin)
+    return Scene(name, body, fibers, tuple(fixed), poses, opt, text, origin)
+
+
+def _read_targets(holder: _Reader, where: str) -> tuple[Target, ...]:
+    targets = []
+    for i, item in enumerate(_array_of_tables(holder, "targets", where)):
+        r = _Reader(item, f"{where}targets[{i}]", holder.origin)
+        targets.append(Target(r.point("point", required=True), r.point("goal", required=True)))
+        r.finish()
+    return tuple(targets)
+
+
+def _read_poses(doc: _Reader) -> tuple[Pose, ...]:
+    """``[[targets]]`` (one pose) or ``[[poses]]`` with their own ``[[poses.targets]]``."""
+    if doc.has("poses") and doc.has("targets"):
+        raise SceneError(f"{doc.origin}: give either [[targets]] (one pose) or [[poses]], not both")
+    if not doc.has("poses"):
+        return (Pose("pose", _read_targets(doc, "")),)
+    poses = []
+    for i, item in enumerate(_array_of_tables(doc, "poses")):
+        r = _Reader(item, f"poses[{i}]", doc.origin)
+        name = r.raw("name") if r.has("name") else f"pose{i}"
+        if not isinstance(name, str) or not name:
+            raise SceneError(f"{doc.origin}: poses[{i}].name must be a non-empty string")
+        poses.append(Pose(name, _read_targets(r, f"poses[{i}].")))
+        r.finish()
+    names = [p.name for p in poses]
+    if len(set(names)) != len(names):
+        raise SceneError(f"{doc.origin}: pose names must differ (got {', '.join(names)})")
+    return tuple(poses)
 
 
 def builtin_scenes() -> list[str]:

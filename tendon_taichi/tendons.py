@@ -17,7 +17,7 @@ from .errors import InputError
 from .model import Model
 from .optimizer import state_solver
 from .problem import Problem
-from .realizable import RealizableResult, solve_realizable
+from .realizable import RealizableResult, solve_realizable_poses
 from .recording import APP_ID, RecordedRun, default_blueprint, mesh_edges, read_chunks, read_recording
 
 
@@ -31,6 +31,7 @@ class ExtractorResult:
     realizable: RealizableResult | None = None
     time_s: float = 0.0
     error: str | None = None
+    pose_names: list[str] = field(default_factory=list)
 
     def as_json(self) -> dict:
         out = {"name": self.name, "tendons": [t.as_json() for t in self.tendons],
@@ -40,6 +41,11 @@ class ExtractorResult:
                                  "ratios": self.realizable.ratios.tolist(),
                                  "tension": self.realizable.tau.tolist(),
                                  "iterations": self.realizable.iterations}
+            if self.realizable.poses is not None:
+                out["realizable"]["poses"] = [
+                    {"name": name, "pose_error": r.pose_error, "pose_error_rel": r.pose_error_rel,
+                     "pose_error_max": r.pose_error_max, "contraction": r.contraction.tolist()}
+                    for name, r in zip(self.pose_names, self.realizable.poses)]
         if self.error is not None:
             out["error"] = self.error
         return out
@@ -69,8 +75,17 @@ def idealized_state(run: RecordedRun, problem: Problem, stage: int, solver: str)
     and its equilibrium re-solved from rest (exactly as the run solved it)."""
     rs = run.stages[stage]
     s = run.settings
-    eq = state_solver(Model.from_problem(problem), solver).solve(ac=rs.ac, x0=problem.mesh.nodes)
-    return IdealizedState(rs.tau, rs.ac, eq.x, s.active_threshold * s.tension_scale, stage, rs.summary["k"])
+    thr, k = s.active_threshold * s.tension_scale, rs.summary["k"]
+    newton = state_solver(Model.from_problem(problem), solver)
+    if problem.n_poses == 1:
+        eq = newton.solve(ac=rs.ac, x0=problem.mesh.nodes)
+        return IdealizedState(rs.tau, rs.ac, eq.x, thr, stage, k)
+    acs = rs.ac.reshape(problem.n_poses, -1)
+    poses = []
+    for ac in acs:
+        eq = newton.solve(ac=ac, x0=problem.mesh.nodes)
+        poses.append(IdealizedState(eq.tau, ac, eq.x, thr, stage, k))
+    return IdealizedState(rs.tau, acs.max(axis=0), poses[0].x, thr, stage, k, poses)
 
 
 def _check_tendons(name: str, tendons, problem: Problem) -> list[Tendon]:
@@ -99,15 +114,18 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
         return ExtractorResult(name, time_s=time.perf_counter() - t0,
                                error=f"extractor '{name}' raised {type(exc).__name__}: {msg}")
     metrics = tendon_metrics(problem, state, tendons, metric_settings)
-    real = solve_realizable(problem, tendons, state, run.settings, solver)
-    for t, c in zip(tendons, real.contraction):
+    real = solve_realizable_poses(problem, tendons, state, run.settings, solver)
+    for t, c in zip(tendons, np.atleast_2d(real.contraction)[0]):  # (several poses: the first's)
         t.contraction = float(c)
     L = problem.size
     ideal = run.stages[state.stage].summary["pose_error"]
     metrics.update(realizable_pose_error=real.pose_error, realizable_pose_error_rel=real.pose_error_rel,
                    idealized_pose_error_rel=ideal / L,
                    realizable_ratio=real.pose_error / ideal if ideal > 0 else float("inf"))
-    return ExtractorResult(name, tendons, metrics, real, time.perf_counter() - t0)
+    if real.poses is not None:
+        metrics["realizable_pose_errors_rel"] = [r.pose_error_rel for r in real.poses]
+    return ExtractorResult(name, tendons, metrics, real, time.perf_counter() - t0,
+                           pose_names=problem.pose_names)
 
 
 def extract(path: str | Path, names: list[str] | None = None, stage: int | None = None,

@@ -192,14 +192,17 @@ def test_checked_in_suite_loads():
     cases = suite["cases"]
     assert len(cases) >= 12 and {c["scene"] for c in cases} == set(SCENES)
     assert sum((SUITE / f).stat().st_size for f in [p.name for p in SUITE.iterdir()]) < 200_000
+    assert sum(c.get("poses", 1) == 1 for c in cases) >= 12 and any(c.get("poses", 1) > 1 for c in cases)
     for c in cases:
-        name = f"{c['scene']}_planted_{c['tendons']}t_s{c['seed']}"
+        poses = c.get("poses", 1)
+        name = f"{c['scene']}_planted_{c['tendons']}t_s{c['seed']}" + (f"_{poses}p" if poses > 1 else "")
         scene = load_scene(SUITE / f"{name}.toml")
         layout = json.loads((SUITE / f"{name}.json").read_text())
         assert scene.name == layout["name"] == name
         assert layout["scene"] == c["scene"] and len(layout["tendons"]) == c["tendons"]
         assert layout["level"] == suite["level"]
-        assert len(scene.targets) == len(load_scene(c["scene"]).targets)
+        assert len(scene.poses) == poses and len(layout.get("poses", [0])) == poses
+        assert len(scene.targets) == poses * len(load_scene(c["scene"]).targets)
 
 
 def test_checked_in_case_regenerates():

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tendon_taichi.errors import InputError
@@ -91,3 +92,32 @@ def test_planted_bench_bad_input_is_one_line(tmp_path, args, message):
     r = _cli("planted-bench", *args, "--out", tmp_path / "pb")
     assert r.returncode == 2 and message in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert not (tmp_path / "pb").exists()
+
+
+def _distance_to_polyline(points, line):
+    """Distance (q,) from points (q, 2) to a polyline (k, 2)."""
+    a, b = line[:-1][None], line[1:][None]
+    p = points[:, None]
+    t = np.clip(((p - a) * (b - a)).sum(-1) / ((b - a) ** 2).sum(-1), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[..., None] * (b - a)), axis=-1).min(axis=1)
+
+
+def test_a_one_tendon_planted_case_is_recovered_end_to_end(tmp_path):
+    """snake_planted_1t_s1 at level 1 with the default settings: the best extractor
+    finds at most planted + 1 tendons, one of them lies along the planted tendon,
+    and the realizable robot with only the found tendons reaches the goals."""
+    from tendon_taichi.planted_bench import run_case
+
+    layout = json.loads((SUITE / "snake_planted_1t_s1.json").read_text())
+    res = run_case(SUITE / "snake_planted_1t_s1.toml", layout, 1, tmp_path)
+    assert res["passed"], res
+    assert res["count"] <= 2 and res["realizable_pose_error_rel"] <= 0.01 and res["length_ratio"] <= 2.0
+    planted = np.array(layout["tendons"][0]["waypoints"])
+    found = [np.array(w) for w in res["extractors"][res["best"]]["tendons"]]
+    longest = max(found, key=lambda w: np.linalg.norm(np.diff(w, axis=0), axis=1).sum())
+    spacing = 0.005  # the scene's fiber spacing at level 1
+    d = _distance_to_polyline(longest, planted)
+    assert np.median(d) < spacing, d  # along the planted path, not somewhere else
+    covered = np.min([_distance_to_polyline(planted, w) for w in found], axis=0) < 2 * spacing
+    assert covered.mean() >= 0.5, covered  # and covering most of it
+    print(f"median distance {1e3 * np.median(d):.2f} mm, planted path covered {100 * covered.mean():.0f} %")

@@ -41,7 +41,7 @@ def test_optimize_summary_follows_the_contract(reference):
         for key in ("stage", "k", "iterations", "pose_error", "pose_error_rel", "pose_error_max",
                     "active_fibers", "active_length", "tau_max", "objective", "time_s"):
             assert key in st
-        assert set(st["objective"]) == {"pose", "sparsity", "continuity", "strand_end", "contraction"}
+        assert set(st["objective"]) == {"pose", "sparsity", "continuity", "strand_end", "contraction", "effort"}
         assert st["pose_error_rel"] == pytest.approx(st["pose_error"] / s["body_size"])
     for term in ("sparsity", "strand_end"):  # off in plain soft IK, on in the homotopy
         assert s["stages"][0]["objective"][term] == 0.0 < s["stages"][1]["objective"][term]

@@ -1,10 +1,10 @@
 """Regenerate the planted-layout suite listed in suite.toml (beside this file).
 
 Usage: python benchmarks/planted/make_suite.py [--no-gallery]
-Writes, per case, <scene>_planted_<n>t_s<seed>.toml and .json (exactly what
-`tendon-taichi planted SCENE --tendons N --seed S --level L --out
-benchmarks/planted` writes), README.md (the table of cases and the commands)
-and gallery.png (every layout on its planted equilibrium).
+Writes, per case, <scene>_planted_<n>t_s<seed>[_<p>p].toml and .json (exactly
+what `tendon-taichi planted SCENE --tendons N --seed S --level L [--poses P]
+--out benchmarks/planted` writes), README.md (the table of cases and the
+commands) and gallery.png (every layout on its planted equilibrium, pose 0).
 """
 
 import argparse
@@ -26,10 +26,12 @@ loads with `tendon-taichi optimize <case>.toml`), `<case>.json` the planted
 layout (per tendon: rest waypoints in m, anchor first; length; contraction;
 tension at the planted equilibrium). `gallery.png` shows every case: rest
 outline grey, planted equilibrium black, tendons in colour (dot: anchor),
-targets blue, goals green.
+targets blue, goals green. A case with `poses = 2` has two target poses made by
+the same tendons (in the second, a random subset of them contracts and the
+others are paid out); its gallery panel shows the first pose.
 
-| case | scene | tendons | seed | planted length (cm) | max target displacement (% of L) |
-|---|---|---|---|---|---|
+| case | scene | tendons | poses | seed | planted length (cm) | max target displacement (% of L) |
+|---|---|---|---|---|---|---|
 {rows}
 
 Regenerate everything (files, this README, the gallery):
@@ -55,14 +57,16 @@ def main():
     rows, commands, cases = [], [], []
     for case in suite["cases"]:
         scene = load_scene(case["scene"])
-        text, layout = plant(scene, case["tendons"], case["seed"], level)
+        poses = case.get("poses", 1)
+        text, layout = plant(scene, case["tendons"], case["seed"], level, poses=poses)
         toml_path, _ = write_planted(HERE, text, layout)
         cases.append((parse_scene(text, origin=str(toml_path)), layout))
-        rows.append(f"| {layout['name']} | {case['scene']} | {case['tendons']} | {case['seed']} | "
+        rows.append(f"| {layout['name']} | {case['scene']} | {case['tendons']} | {poses} | {case['seed']} | "
                     f"{100 * layout['planted_length']:.1f} | "
                     f"{100 * layout['pose']['max_target_displacement_rel']:.1f} |")
         commands.append(f"tendon-taichi planted {case['scene']} --tendons {case['tendons']} "
-                        f"--seed {case['seed']} --level {level} --out benchmarks/planted")
+                        f"--seed {case['seed']} --level {level}" + (f" --poses {poses}" if poses > 1 else "")
+                        + " --out benchmarks/planted")
         print(rows[-1], flush=True)
     (HERE / "README.md").write_text(README.format(level=level, rows="\n".join(rows),
                                                   commands="\n".join(commands)))
