@@ -24,8 +24,8 @@ through one adjoint solve.
   (co-contraction) cost, so fibers that need not pull are paid out.
 
 Several poses (a scene's ``[[poses]]``): each pose ``p`` has its own
-contractions and equilibrium; ``pose`` and ``contraction`` are summed over the
-poses, while the layout terms (``sparsity``, ``continuity``, ``strand_end``)
+contractions and equilibrium; ``pose``, ``contraction`` and ``effort`` are
+summed over the poses, while the layout terms (``sparsity``, ``continuity``, ``strand_end``)
 act on the union tension ``tau_u = sqrt(sum_p tau_p^2)`` - a fiber is active if
 it is active in any pose, and a strand keeps one tension in each pose. With
 one pose ``tau_u = tau``.
