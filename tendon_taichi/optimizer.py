@@ -225,7 +225,8 @@ class SoftIK:
         self.k: float | None = None
         self.configure(None)
         self.evaluations = 0
-        self._last: tuple[np.ndarray, float, np.ndarray, Evaluation, np.ndarray] | None = None
+        #: the last evaluated point: r, objective, gradient, evaluation, positions (P, n, 2), tensions (P, C)
+        self._last: tuple[np.ndarray, float, np.ndarray, Evaluation, np.ndarray, np.ndarray] | None = None
         self.eval_tol = EVAL_TOL
 
     # ------------------------------------------------------------ stages
@@ -274,23 +275,23 @@ class SoftIK:
             grad[i] = ev.dac[i] + ev.dtau[i] * cab["tau_ac"] - m.mixed_transpose_product(lam)
         grad = grad.ravel() * self.a0
         self.evaluations += 1
-        self._last = (r, ev.total, grad, ev, np.array([s.x for s in states]))
+        self._last = (r, ev.total, grad, ev, np.array([s.x for s in states]), np.array([s.tau for s in states]))
         return ev.total, grad
 
     def figures(self, r: np.ndarray) -> Figures:
         """Figures at r (evaluated if it is not the last point)."""
         self.evaluate(r)
-        _, _, _, ev, xs = self._last
+        _, _, _, ev, xs, taus = self._last
         p = self.problem
-        tau = union_tension(self.tensions())[0]
+        tau = union_tension(taus)[0]
         pe, worst, rows = pose_errors(p, xs)
         active = active_set(tau, self.settings)
         return Figures(pe, pe / p.size, worst, int(active.sum()),
                        float(self.a0[:self.n_cables][active].sum()), float(tau.max()), dict(ev.terms), rows)
 
     def tensions(self) -> np.ndarray:
-        """Per-pose tensions (P, C) of the last solved equilibria, N."""
-        return np.array([ps.model.tensions() for ps in self.poses])
+        """Per-pose tensions (P, C) of the last evaluated point, N."""
+        return self._last[5]
 
     def last_value(self) -> float:
         """The objective at the last evaluated point."""
@@ -298,7 +299,7 @@ class SoftIK:
 
     def state(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-pose positions (P, n, 2) and tensions (P, C) of the last evaluated point."""
-        return self._last[4], self.tensions()
+        return self._last[4], self._last[5]
 
 
 def settled(history: list[tuple[float, bytes]], stage: int, settings: OptimizeSettings) -> bool:

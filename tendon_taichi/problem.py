@@ -70,12 +70,17 @@ class Problem:
 
     def pose(self, i: int) -> "Problem":
         """The problem of pose ``i`` alone (same mesh and fibers, that pose's targets)."""
-        if self.n_poses == 1:
-            return self
-        sel = self.target_pose == i
-        return replace(self, scene=replace(self.scene, poses=(self.scene.poses[i],)),
-                       target=Embedding(self.target.tri[sel], self.target.bary[sel]),
-                       target_goal=self.target_goal[sel])
+        return self if self.n_poses == 1 else self._pose_problems[i]
+
+    @cached_property
+    def _pose_problems(self) -> list["Problem"]:
+        out = []
+        for i, pose in enumerate(self.scene.poses):
+            sel = self.target_pose == i
+            out.append(replace(self, scene=replace(self.scene, poses=(pose,)),
+                               target=Embedding(self.target.tri[sel], self.target.bary[sel]),
+                               target_goal=self.target_goal[sel]))
+        return out
 
     def target_positions(self, x: np.ndarray) -> np.ndarray:
         """Where the target points are (t, 2) for node positions ``x`` (n, 2)."""

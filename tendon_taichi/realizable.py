@@ -15,7 +15,7 @@ from .cables import CableSet
 from .extraction import IdealizedState, Tendon
 from .mesh import Embedding
 from .model import Model
-from .optimizer import RunCallbacks, SoftIK, run_stage
+from .optimizer import RunCallbacks, SoftIK, pose_errors, run_stage
 from .problem import Problem
 from .scene import OptimizeSettings
 from .solvers import NewtonSolver
@@ -106,12 +106,11 @@ def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedSt
     L = problem.size
     if not tendons:  # the bare body (it sags under gravity, if any)
         x = NewtonSolver(Model.from_problem(problem, cables=CableSet.empty()), solver).solve().x
-        err = np.linalg.norm(problem.target_positions(x) - problem.target_goal, axis=1)
-        pe = float(np.sqrt((err ** 2).sum()))
-        return RealizableResult(np.zeros(0), np.zeros(0), np.zeros(0), x, pe, pe / L, float(err.max()),
+        pe, worst, _ = pose_errors(problem, [x])
+        return RealizableResult(np.zeros(0), np.zeros(0), np.zeros(0), x, pe, pe / L, worst,
                                 0, 0, time.perf_counter() - t0)
     ik = SoftIK(problem, settings, solver, cables=tendon_cables(problem, tendons))
     st = run_stage(ik, 0, warm_ratios(problem, tendons, state, tensions), RunCallbacks())
-    err = np.linalg.norm(problem.target_positions(st.x) - problem.target_goal, axis=1)
-    return RealizableResult(st.ac, st.r, st.tau, st.x, st.figures.pose_error, st.figures.pose_error_rel,
-                            float(err.max()), st.iterations, st.evaluations, time.perf_counter() - t0)
+    f = st.figures
+    return RealizableResult(st.ac, st.r, st.tau, st.x, f.pose_error, f.pose_error_rel, f.pose_error_max,
+                            st.iterations, st.evaluations, time.perf_counter() - t0)

@@ -99,7 +99,7 @@ def _summary(problem: Problem, solver: str, stages: list, recording: Path, expor
            "export": str(export) if export else None, "time_s": time.perf_counter() - t0}
     if ik is not None:
         out["evaluations"] = ik.evaluations
-        out["linear_iterations"] = ik.linear.stats.iterations
+        out["linear_iterations"] = sum(ps.linear.stats.iterations for ps in ik.poses)
     out.update(extra)
     return out
 
@@ -183,9 +183,9 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
             ik.configure(st.k)
             eqs = ik.restart(st.r)
             st.xs, st.taus = np.array([eq.x for eq in eqs]), np.array([eq.tau for eq in eqs])
-    write_export(export, problem, final.x, ik.split(final.ac)[0], final.taus[0], ac_stage0=s0.ac,
-                 tau_stage0=s0.tau, r_final=final.r, **pose_arrays(problem, final.xs, ik.split(final.ac),
-                                                                   final.taus))
+    acs = ik.split(final.ac)
+    write_export(export, problem, final.x, acs[0], final.taus[0], ac_stage0=s0.ac, tau_stage0=s0.tau,
+                 r_final=final.r, **pose_arrays(problem, final.xs, acs, final.taus))
     warnings = []
     if s0.figures.pose_error_rel > UNREACHED:
         warnings.append(f"the goals are out of reach: even unregularized soft IK leaves a pose "

@@ -77,15 +77,13 @@ def idealized_state(run: RecordedRun, problem: Problem, stage: int, solver: str)
     s = run.settings
     thr, k = s.active_threshold * s.tension_scale, rs.summary["k"]
     newton = state_solver(Model.from_problem(problem), solver)
-    if problem.n_poses == 1:
-        eq = newton.solve(ac=rs.ac, x0=problem.mesh.nodes)
-        return IdealizedState(rs.tau, rs.ac, eq.x, thr, stage, k)
     acs = rs.ac.reshape(problem.n_poses, -1)
     poses = []
     for ac in acs:
         eq = newton.solve(ac=ac, x0=problem.mesh.nodes)
         poses.append(IdealizedState(eq.tau, ac, eq.x, thr, stage, k))
-    return IdealizedState(rs.tau, acs.max(axis=0), poses[0].x, thr, stage, k, poses)
+    return IdealizedState(rs.tau, acs.max(axis=0), poses[0].x, thr, stage, k,
+                          poses if len(poses) > 1 else None)
 
 
 def _check_tendons(name: str, tendons, problem: Problem) -> list[Tendon]:

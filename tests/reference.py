@@ -1,4 +1,4 @@
-"""Independent numpy formulas used by the tests (not imported by the package)."""
+"""Independent numpy formulas and finite differences used by the tests (not imported by the package)."""
 
 import numpy as np
 
@@ -67,3 +67,12 @@ def zcq(e, eps):
 def zcq_d1(e, eps):
     e = np.asarray(e, dtype=float)
     return np.where(e > eps, e - 0.5 * eps, np.where(e > 0, e * e / (2 * eps), 0.0))
+
+
+def objective_fd(ik, r, d, h=1e-6):
+    """Central difference of a SoftIK objective at ``r`` along ``d`` (each side solved afresh)."""
+    vals = []
+    for sgn in (1, -1):
+        ik._last = None
+        vals.append(ik.evaluate(r + sgn * h * d)[0])
+    return (vals[0] - vals[1]) / (2 * h)

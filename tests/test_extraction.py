@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from tendon_taichi import CableSet, Model, NewtonSolver, build_problem, load_scene, parse_scene
+from tendon_taichi import Model, NewtonSolver, build_problem, load_scene, parse_scene
 from tendon_taichi.extraction import (FiberView, IdealizedState, MetricSettings, PluginError, Tendon,
                                       available_extractors, load_extractor, tendon_metrics)
 from tendon_taichi.realizable import solve_realizable, tendon_cables
