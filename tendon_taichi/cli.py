@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -314,7 +315,8 @@ def _metric_table(ex) -> list[str]:
             rows.append(f"{r.name:<18} failed: {r.error}")
             continue
         m = r.metrics
-        rows.append(f"{r.name:<18} {m['count']:>7} {100 * m['total_length']:>5.1f} cm "
+        count = f"{m['extracted_count']}->{m['count']}" if m["extracted_count"] != m["count"] else m["count"]
+        rows.append(f"{r.name:<18} {count:>7} {100 * m['total_length']:>5.1f} cm "
                     f"{np.degrees(m['total_turning']):>6.0f} d {np.degrees(m['max_turn']):>6.0f} d "
                     f"{m['kinks']:>5} {m['capstan_worst']:>7.3f} {m['tension_cv']:>7.3f} "
                     f"{100 * m['coverage']:>7.1f}% {100 * m['realizable_pose_error_rel']:>9.2f}% "
@@ -342,12 +344,33 @@ def _extraction_output(args, ex) -> int:
     return 4 if failed else 0
 
 
+def _add_consolidation_flags(p: argparse.ArgumentParser) -> None:
+    from .consolidation import GAP, TOLERANCE
+
+    p.add_argument("--consolidate-tol", type=float, default=TOLERANCE, metavar="F",
+                   help="drop or join extracted tendons while the realizable pose error rises by at most "
+                        f"F x L in all (default {TOLERANCE:g}; README 'Consolidation')")
+    p.add_argument("--join-gap", type=float, default=GAP, metavar="S",
+                   help=f"join two tendons whose ends are at most S lattice spacings apart (default {GAP:g})")
+    p.add_argument("--no-consolidate", action="store_true", help="keep the extracted tendons as they are")
+
+
+def _consolidation(args):
+    from .consolidation import ConsolidationSettings
+
+    if args.consolidate_tol < 0 or not math.isfinite(args.consolidate_tol):
+        raise InputError(f"--consolidate-tol must be a finite number >= 0 (got {args.consolidate_tol})")
+    if args.join_gap < 0 or not math.isfinite(args.join_gap):
+        raise InputError(f"--join-gap must be a finite number >= 0 (got {args.join_gap})")
+    return ConsolidationSettings(-1.0 if args.no_consolidate else args.consolidate_tol, args.join_gap)
+
+
 def cmd_extract(args) -> int:
     from .tendons import extract
 
     options = _parse_options(args.option, args.extractor)
     ex = extract(args.recording, [args.extractor], stage=args.stage, options=options, solver=args.solver,
-                 record=not args.no_record)
+                 record=not args.no_record, consolidation=_consolidation(args))
     r = ex.results[0]
     if r.error is not None:
         raise TendonError(r.error)
@@ -367,7 +390,7 @@ def cmd_compare(args) -> int:
     from .tendons import extract
 
     ex = extract(args.recording, args.extractors, stage=args.stage, options=_parse_options(args.option, None),
-                 solver=args.solver, record=not args.no_record)
+                 solver=args.solver, record=not args.no_record, consolidation=_consolidation(args))
     return _extraction_output(args, ex)
 
 
@@ -440,7 +463,7 @@ def cmd_planted_bench(args) -> int:
     overrides = _optimize_overrides(args)
     workers, scheduler = _cluster_args(args)
     result = run_suite(args.suite, args.resolution, args.out, overrides, args.extractors, args.solver,
-                       args.cases, workers=workers, scheduler=scheduler)
+                       args.cases, workers=workers, scheduler=scheduler, consolidation=_consolidation(args))
     _json_out(args, result)
     if args.json != "-":
         print("\n".join(table(result)))
@@ -556,6 +579,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="extractor option (compare: NAME.K=V); repeatable")
         s.add_argument("--solver", choices=("recorded",) + SOLVER_CHOICES, default="recorded")
         s.add_argument("--no-record", action="store_true", help="do not log the tendons into the recording")
+        _add_consolidation_flags(s)
         _add_json(s)
         s.set_defaults(func=cmd_extract if name == "extract" else cmd_compare)
 
@@ -602,6 +626,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")
     s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto")
     _add_optimize_flags(s)
+    _add_consolidation_flags(s)
     _add_cluster_flags(s, "default: one per core")
     _add_json(s)
     s.set_defaults(func=cmd_planted_bench)

@@ -3,10 +3,10 @@
 A suite is a folder of planted cases (``tendon-taichi planted``): per case a
 scene file ``NAME.toml`` whose goals were made by known tendons, and the
 layout ``NAME.json`` (``tendons`` with their rest ``waypoints``, ``length``,
-``planted_length``). Each case runs ``optimize`` and then every extractor on
-the last stage, and is scored against what was planted: pose error, active
-length / planted length, tendon count / planted count, kinks, worst capstan
-factor, realizable pose error, time. A case passes when its best extractor
+``planted_length``). Each case runs ``optimize`` and then every extractor,
+each followed by consolidation, on the last stage, and is scored against what
+was planted: pose error, active length / planted length, tendon count /
+planted count, kinks, worst capstan factor, realizable pose error, time. A case passes when its best extractor
 (the lowest realizable pose error among those that find at most planted + 1
 tendons) finds at most planted + 1 tendons, with a realizable pose error of
 at most 1 % of L, and the active length is at most twice the planted one.
@@ -19,6 +19,7 @@ engine can run them as separate tasks.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import time
 from dataclasses import dataclass
@@ -85,9 +86,11 @@ def best_extractor(extractors: dict[str, dict], planted_count: int) -> str | Non
 
 def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Path,
              overrides: dict | None = None, extractors: list[str] | None = None,
-             solver: str = "auto") -> dict:
-    """Optimize one planted case and run the extractors on its last stage; the
-    recording goes to ``out_dir/NAME-rLEVEL.rrd``. Returns the case's figures."""
+             solver: str = "auto", consolidation: dict | None = None) -> dict:
+    """Optimize one planted case and run the extractors on its last stage
+    (``consolidation``: the fields of :class:`~tendon_taichi.consolidation.ConsolidationSettings`);
+    the recording goes to ``out_dir/NAME-rLEVEL.rrd``. Returns the case's figures."""
+    from .consolidation import ConsolidationSettings
     from .runs import optimize
     from .scene import load_scene, with_overrides
     from .tendons import extract
@@ -103,7 +106,7 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
     rec = out_dir / f"{name}-r{level}.rrd"
     run = optimize(scene, level, solver, record=rec)
     t_opt = time.perf_counter() - t0
-    ex = extract(rec, extractors)
+    ex = extract(rec, extractors, consolidation=ConsolidationSettings(**(consolidation or {})))
     final = run.summary["final"]
     per = {}
     for r in ex.results:
@@ -111,7 +114,8 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
             per[r.name] = {"error": r.error}
             continue
         m = r.metrics
-        per[r.name] = {"count": int(m["count"]), "total_length": m["total_length"], "kinks": int(m["kinks"]),
+        per[r.name] = {"count": int(m["count"]), "extracted_count": int(m["extracted_count"]),
+                       "total_length": m["total_length"], "kinks": int(m["kinks"]),
                        "capstan_worst": m["capstan_worst"], "tension_cv": m["tension_cv"],
                        "realizable_pose_error_rel": m["realizable_pose_error_rel"],
                        "tendons": [t.waypoints.tolist() for t in r.tendons]}
@@ -126,7 +130,7 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
             "pose_error_rel": final["pose_error_rel"], "active_fibers": final["active_fibers"],
             "active_length": final["active_length"], "length_ratio": length_ratio,
             "stages": len(run.stages), "extractors": per, "best": best,
-            "count": b.get("count"), "count_ratio": (b["count"] / planted_count) if best else None,
+            "count": b.get("count"), "extracted_count": b.get("extracted_count"), "count_ratio": (b["count"] / planted_count) if best else None,
             "realizable_pose_error_rel": b.get("realizable_pose_error_rel"),
             "kinks": b.get("kinks"), "capstan_worst": b.get("capstan_worst"),
             "passed": passed, "optimize_s": t_opt, "time_s": time.perf_counter() - t0,
@@ -149,7 +153,7 @@ def totals(cases: list[dict]) -> dict:
             "time_s": float(sum(c.get("time_s", 0.0) for c in cases))}
 
 
-CSV_COLUMNS = ("case", "scene", "level", "planted_count", "count", "best", "planted_length", "active_length",
+CSV_COLUMNS = ("case", "scene", "level", "planted_count", "count", "extracted_count", "best", "planted_length", "active_length",
                "length_ratio", "pose_error_rel", "realizable_pose_error_rel", "kinks", "capstan_worst",
                "passed", "time_s", "error")
 
@@ -228,13 +232,17 @@ def _describe(row: dict) -> str:
 
 def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides: dict | None = None,
               extractors: list[str] | None = None, solver: str = "auto", cases: list[str] | None = None,
-              progress=None, workers: int | None = None, scheduler: str | None = None) -> dict:
+              progress=None, workers: int | None = None, scheduler: str | None = None,
+              consolidation=None) -> dict:
     """Run every case of a suite (or the named ``cases``) as tasks of
     :func:`tendon_taichi.cluster.run_tasks` (``workers``: local Dask cluster size,
     None: one per core, 0: in this process; ``scheduler``: an existing cluster).
+    ``consolidation`` (:class:`~tendon_taichi.consolidation.ConsolidationSettings`,
+    default settings if None) follows every extractor.
     Outputs are rewritten after each case, and a re-run reuses the finished ones
     (``out_dir/cases/<id>/result.json``), so an interrupted run keeps what it did."""
     from .cluster import Task, case_id, run_tasks
+    from .consolidation import ConsolidationSettings
     from .errors import Stopped
     from .extraction import available_extractors
     from .scene import load_scene, with_overrides
@@ -249,14 +257,18 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
     for case in suite:  # bad scene files or settings stop the run before it starts
         with_overrides(load_scene(str(case.scene_path)), overrides)
     names = sorted(extractors or available_extractors())
+    cons = dataclasses.asdict(consolidation or ConsolidationSettings())
     out_dir = Path(out_dir)
     tasks = [Task(case_id({"kind": "planted", "scene": case.scene_path.read_text(), "layout": case.layout,
-                           "level": level, "settings": overrides, "extractors": names, "solver": solver}),
+                           "level": level, "settings": overrides, "extractors": names, "solver": solver,
+                           "consolidation": cons}),
                   case.name, run_case,
-                  (str(case.scene_path), case.layout, level, str(out_dir / "cases"), overrides, names, solver))
+                  (str(case.scene_path), case.layout, level, str(out_dir / "cases"), overrides, names, solver,
+                   cons))
              for case in suite]
     by_name = {c.name: c for c in suite}
-    result = {"suite": str(directory), "level": level, "settings": overrides, "cases": []}
+    result = {"suite": str(directory), "level": level, "settings": overrides, "consolidation": cons,
+              "cases": []}
     done = {}
 
     def on_outcome(o) -> None:

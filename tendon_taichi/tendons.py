@@ -1,5 +1,6 @@
-"""Extract tendons from a recorded run, score them and prove them on the realizable
-robot (the engine behind the ``extract`` and ``compare`` commands)."""
+"""Extract tendons from a recorded run, prove them on the realizable robot,
+consolidate them (fewer tendons for almost the same pose) and score them (the
+engine behind the ``extract`` and ``compare`` commands)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .consolidation import Consolidation, ConsolidationSettings, consolidate
 from .extraction import IdealizedState, MetricSettings, PluginError, Tendon, available_extractors, \
     load_extractor, tendon_metrics
 from .errors import InputError
@@ -32,10 +34,13 @@ class ExtractorResult:
     time_s: float = 0.0
     error: str | None = None
     pose_names: list[str] = field(default_factory=list)
+    consolidation: Consolidation | None = None
 
     def as_json(self) -> dict:
         out = {"name": self.name, "tendons": [t.as_json() for t in self.tendons],
                "metrics": self.metrics, "time_s": self.time_s}
+        if self.consolidation is not None:
+            out["consolidation"] = self.consolidation.as_json()
         if self.realizable is not None:
             out["realizable"] = {"contraction": self.realizable.contraction.tolist(),
                                  "ratios": self.realizable.ratios.tolist(),
@@ -97,9 +102,11 @@ def _check_tendons(name: str, tendons, problem: Problem) -> list[Tendon]:
 
 
 def run_extractor(name: str, problem: Problem, state: IdealizedState, options: dict | None,
-                  run: RecordedRun, solver: str, metric_settings: MetricSettings) -> ExtractorResult:
-    """Run one extractor, score its tendons and solve its realizable robot; a failing
-    plugin gives a result with ``error`` instead of raising."""
+                  run: RecordedRun, solver: str, metric_settings: MetricSettings,
+                  consolidation: ConsolidationSettings | None = None) -> ExtractorResult:
+    """Run one extractor, solve its realizable robot, consolidate its tendons
+    (:mod:`tendon_taichi.consolidation`) and score them; a failing plugin gives a
+    result with ``error`` instead of raising."""
     t0 = time.perf_counter()
     try:
         ext = load_extractor(name)
@@ -111,8 +118,11 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
         msg = str(exc).splitlines()[0] if str(exc) else ""
         return ExtractorResult(name, time_s=time.perf_counter() - t0,
                                error=f"extractor '{name}' raised {type(exc).__name__}: {msg}")
-    metrics = tendon_metrics(problem, state, tendons, metric_settings)
     real = solve_realizable_poses(problem, tendons, state, run.settings, solver)
+    cons = consolidate(problem, tendons, state, run.settings, real, consolidation or ConsolidationSettings(),
+                       solver)
+    tendons, real = cons.tendons, cons.realizable
+    metrics = tendon_metrics(problem, state, tendons, metric_settings)
     for t, c in zip(tendons, np.atleast_2d(real.contraction)[0]):  # (several poses: the first's)
         t.contraction = float(c)
     L = problem.size
@@ -120,17 +130,20 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
     metrics.update(realizable_pose_error=real.pose_error, realizable_pose_error_rel=real.pose_error_rel,
                    idealized_pose_error_rel=ideal / L,
                    realizable_ratio=real.pose_error / ideal if ideal > 0 else float("inf"))
+    metrics["extracted_count"] = cons.extracted_count
     if real.poses is not None:
         metrics["realizable_pose_errors_rel"] = [r.pose_error_rel for r in real.poses]
     return ExtractorResult(name, tendons, metrics, real, time.perf_counter() - t0,
-                           pose_names=problem.pose_names)
+                           pose_names=problem.pose_names, consolidation=cons)
 
 
 def extract(path: str | Path, names: list[str] | None = None, stage: int | None = None,
             options: dict[str, dict] | None = None, solver: str = "recorded",
-            metric_settings: MetricSettings | None = None, record: bool = True) -> Extraction:
+            metric_settings: MetricSettings | None = None, record: bool = True,
+            consolidation: ConsolidationSettings | None = None) -> Extraction:
     """Run extractors (default: every installed one) on a recorded stage (default:
-    the last completed); with ``record``, log their tendons into the recording."""
+    the last completed), each followed by consolidation (default settings unless
+    ``consolidation`` is given); with ``record``, log their tendons into the recording."""
     run = read_recording(path)
     if not run.stages:
         raise InputError(f"'{path}' has no completed stage to extract from")
@@ -147,7 +160,7 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     problem = run.problem()
     state = idealized_state(run, problem, stage, solver)
     ms = metric_settings or MetricSettings()
-    results = [run_extractor(n, problem, state, options.get(n), run, solver, ms) for n in names]
+    results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation) for n in names]
     out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
     if record and any(r.error is None for r in results):
         log_tendons(out)

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import PLANTED, lattice_path
 
 from tendon_taichi import Model, NewtonSolver, build_problem, load_scene, parse_scene
 from tendon_taichi.extraction import (FiberView, IdealizedState, MetricSettings, PluginError, Tendon,
@@ -30,19 +31,6 @@ goal = [0.03, 0.045]
 @pytest.fixture(scope="module")
 def square():
     return build_problem(parse_scene(SQUARE), 1)
-
-
-def lattice_path(problem, points):
-    """Fiber ids along consecutive lattice points (each pair must be a fiber)."""
-    nodes, edges = problem.fibers.nodes, problem.fibers.edges
-    ids = []
-    for a, b in zip(points[:-1], points[1:]):
-        ia = int(np.argmin(np.linalg.norm(nodes - a, axis=1)))
-        ib = int(np.argmin(np.linalg.norm(nodes - b, axis=1)))
-        k = np.flatnonzero(((edges[:, 0] == ia) & (edges[:, 1] == ib)) | ((edges[:, 0] == ib) & (edges[:, 1] == ia)))
-        assert len(k) == 1, (a, b)
-        ids.append(int(k[0]))
-    return ids
 
 
 def row(x0, x1, y, s=0.005):
@@ -191,30 +179,6 @@ def test_strand_and_sliding_tendon_are_the_same_robot():
 
 
 # ------------------------------------------------------------------ planted tendons on t_shape
-PLANTED = [
-    [(-0.045, 0.065), (-0.04, 0.065), (-0.035, 0.065), (-0.03, 0.065), (-0.025, 0.065), (-0.02, 0.065),
-     (-0.015, 0.065), (-0.01, 0.065), (-0.005, 0.06)] + [(-0.005, y) for y in np.arange(0.055, 0.0099, -0.005)],
-    [(0.045, 0.075), (0.04, 0.075), (0.035, 0.075), (0.03, 0.075), (0.025, 0.075), (0.02, 0.075), (0.015, 0.075),
-     (0.01, 0.075), (0.005, 0.075)],
-]
-
-
-@pytest.fixture(scope="module")
-def planted():
-    """t_shape with its goals made by two lattice-path tendons at 8 % contraction."""
-    base = build_problem(load_scene("t_shape"), 1)
-    paths = [lattice_path(base, [np.array(q) for q in path]) for path in PLANTED]
-    view = FiberView(base)
-    ones = state_of(base, np.ones(base.fibers.n_fibers))
-    tendons = [view.tendon(int(np.argmin(np.linalg.norm(base.fibers.nodes - np.array(path[0]), axis=1))), f, ones)
-               for path, f in zip(PLANTED, paths)]
-    model = Model.from_problem(base, cables=tendon_cables(base, tendons))
-    eq = NewtonSolver(model, "direct").solve(ac=0.08 * np.array([t.length for t in tendons]))
-    from dataclasses import replace
-    p = replace(base, target_goal=base.target_positions(eq.x))
-    return p, paths, eq
-
-
 def _hausdorff(a, b):
     d = np.linalg.norm(a[:, None] - b[None], axis=2)
     return max(d.min(0).max(), d.min(1).max())

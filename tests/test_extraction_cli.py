@@ -58,6 +58,11 @@ def test_extract_writes_json_svg_and_logs_into_the_recording(run_rrd, cli, tmp_p
                 "coverage", "realizable_pose_error", "realizable_pose_error_rel", "idealized_pose_error_rel"):
         assert key in e["metrics"]
     assert e["metrics"]["count"] == len(e["tendons"]) >= 1
+    # consolidation (default on) reports where it started and every step it took
+    cons = e["consolidation"]
+    assert cons["extracted_count"] == e["metrics"]["extracted_count"] >= e["metrics"]["count"]
+    assert cons["extracted_count"] - len(cons["steps"]) == e["metrics"]["count"]
+    assert e["metrics"]["realizable_pose_error_rel"] <= cons["extracted_realizable_pose_error_rel"] + 1e-3 + 1e-12
     for t in e["tendons"]:
         assert set(t) >= {"waypoints", "length", "tension", "contraction"}
     root = ET.parse(svg).getroot()
@@ -81,6 +86,10 @@ def test_compare_runs_every_extractor_with_a_picture(run_rrd, cli, tmp_path):
     assert all("error" not in e for e in out["extractors"]) and png.stat().st_size > 10000
     table = cli("compare", run_rrd, "--no-record", "--extractors", "strands", "path_cover").stdout
     assert "strands" in table and "path_cover" in table and "realizable" in table
+    raw = json.loads(cli("compare", run_rrd, "--no-record", "--no-consolidate", "--json").stdout)
+    for e in raw["extractors"]:
+        assert e["consolidation"]["steps"] == [] and e["consolidation"]["evaluations"] == 0
+        assert e["metrics"]["count"] == e["metrics"]["extracted_count"]
 
 
 def test_third_party_plugin_is_listed_and_used(run_rrd, cli, plugin_path):
@@ -118,6 +127,8 @@ def test_extract_bad_input(run_rrd, cli, tmp_path):
     _one_line(cli("extract", run_rrd, "--extractor", "strands", "--option", "speed=3", "--no-record"),
               "has no option 'speed'")
     _one_line(cli("extract", run_rrd, "--extractor", "strands", "--stage", 9, "--no-record"), "--stage 9")
+    _one_line(cli("compare", run_rrd, "--consolidate-tol", "-0.1", "--no-record"), "--consolidate-tol")
+    _one_line(cli("compare", run_rrd, "--join-gap", "nan", "--no-record"), "--join-gap")
     _one_line(cli("extract", tmp_path / "none.rrd", "--extractor", "strands"), "does not exist")
     from tendon_taichi import build_problem, load_scene
     from tendon_taichi.recording import Recorder

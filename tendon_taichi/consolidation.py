@@ -1,0 +1,166 @@
+"""Tendon consolidation: fewer tendons for (almost) the same pose.
+
+An extractor reads strands off the idealized tensions; it does not know what a
+tendon costs. A designer pays for every tendon (a motor, an anchor, routing),
+so after extraction the engine greedily reduces the count, proving every step
+on the realizable robot (:mod:`tendon_taichi.realizable`). Each round tries
+
+* **drop** one tendon, and
+* **join** two tendons whose ends lie within ``gap`` lattice spacings (rest
+  coordinates), bridged by the shortest fiber path between those ends - one
+  cable, one tension;
+
+solves the realizable robot for every candidate, and keeps the candidate with
+the lowest realizable pose error, provided that error exceeds the extracted
+layout's by at most ``tolerance`` x L (the rise is cumulative over all
+rounds). It stops when no candidate is within the tolerance. A tendon that
+buys less pose accuracy than ``tolerance`` x L is not worth its motor.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .extraction import FiberView, IdealizedState, Tendon
+from .problem import Problem
+from .realizable import RealizableResult, solve_realizable_poses
+from .scene import OptimizeSettings
+
+#: defaults (fraction of L; lattice spacings)
+TOLERANCE = 1.0e-3
+GAP = 3.0
+
+
+@dataclass(frozen=True)
+class ConsolidationSettings:
+    """``tolerance``: allowed cumulative rise of the realizable pose error, as a
+    fraction of L (negative: keep the extracted tendons as they are); ``gap``:
+    farthest two tendon ends may be apart to be joined, in lattice spacings."""
+
+    tolerance: float = TOLERANCE
+    gap: float = GAP
+
+    @property
+    def enabled(self) -> bool:
+        return self.tolerance >= 0.0
+
+
+@dataclass
+class Step:
+    """One accepted round: ``action`` ('drop' or 'join'), the indices of the tendons
+    it acted on (in the list before the round), and the count and realizable pose
+    error (fraction of L) after it."""
+
+    action: str
+    tendons: tuple[int, ...]
+    count: int
+    realizable_pose_error_rel: float
+
+    def as_json(self) -> dict:
+        return {"action": self.action, "tendons": list(self.tendons), "count": self.count,
+                "realizable_pose_error_rel": self.realizable_pose_error_rel}
+
+
+@dataclass
+class Consolidation:
+    """The consolidated ``tendons``, their ``realizable`` robot, and the ``steps``
+    taken from the ``extracted_count`` tendons whose realizable pose error was
+    ``extracted_pose_error_rel``; ``evaluations`` realizable solves were made."""
+
+    tendons: list[Tendon]
+    realizable: RealizableResult
+    extracted_count: int
+    extracted_pose_error_rel: float
+    steps: list[Step] = field(default_factory=list)
+    evaluations: int = 0
+
+    def as_json(self) -> dict:
+        return {"extracted_count": self.extracted_count,
+                "extracted_realizable_pose_error_rel": self.extracted_pose_error_rel,
+                "steps": [s.as_json() for s in self.steps], "evaluations": self.evaluations}
+
+
+class Bridges:
+    """Joins of two tendons through the fiber lattice (rest coordinates)."""
+
+    def __init__(self, problem: Problem, state: IdealizedState, gap: float):
+        from scipy.sparse import csr_matrix
+
+        f = problem.fibers
+        self.view = FiberView(problem)
+        self.state = state
+        self.reach = gap * f.spacing
+        n, e = len(f.nodes), f.edges
+        self.graph = csr_matrix((np.r_[f.a0, f.a0], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                                shape=(n, n))
+        self.fiber_of = {}
+        for i, (a, b) in enumerate(e):
+            self.fiber_of[int(a), int(b)] = self.fiber_of[int(b), int(a)] = i
+
+    def joins(self, a: Tendon, b: Tendon) -> list[Tendon]:
+        """Every join of ``a`` and ``b`` end to end (up to four: either end of each)
+        whose ends are within reach and whose bridged path visits no node twice."""
+        out = []
+        for na in (a.nodes[::-1], a.nodes):  # na ends at the joint
+            for nb in (b.nodes, b.nodes[::-1]):  # nb starts there
+                t = self.join(na, nb)
+                if t is not None:
+                    out.append(t)
+        return out
+
+    def join(self, na: np.ndarray, nb: np.ndarray) -> Tendon | None:
+        """The tendon along ``na``, the shortest fiber path from its last node to the
+        first of ``nb``, then ``nb``; None when the ends are out of reach."""
+        from scipy.sparse.csgraph import dijkstra
+
+        u, v = int(na[-1]), int(nb[0])
+        nodes = self.view.nodes
+        if np.linalg.norm(nodes[u] - nodes[v]) > self.reach:
+            return None
+        dist, pred = dijkstra(self.graph, indices=u, return_predecessors=True, limit=2.0 * self.reach)
+        if not np.isfinite(dist[v]):
+            return None
+        bridge = [v]
+        while bridge[-1] != u:
+            bridge.append(int(pred[bridge[-1]]))
+        path = [int(w) for w in na] + bridge[::-1][1:-1] + [int(w) for w in nb]
+        if len(set(path)) != len(path):
+            return None
+        fibers = [self.fiber_of[path[k], path[k + 1]] for k in range(len(path) - 1)]
+        return self.view.tendon(path[0], fibers, self.state)
+
+
+def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings: OptimizeSettings,
+                real: RealizableResult, options: ConsolidationSettings, solver: str = "auto") -> Consolidation:
+    """Greedy drops and joins (module docstring) from ``tendons``, whose realizable
+    robot ``real`` is already solved."""
+    base = real.pose_error_rel
+    out = Consolidation(list(tendons), real, len(tendons), base)
+    if not options.enabled:
+        return out
+    bridges = Bridges(problem, state, options.gap)
+    while out.tendons:
+        best = None
+        for action, ids, cand in _candidates(out.tendons, bridges):
+            r = solve_realizable_poses(problem, cand, state, settings, solver)
+            out.evaluations += 1
+            if best is None or r.pose_error_rel < best[3].pose_error_rel:
+                best = (action, ids, cand, r)
+        if best is None or best[3].pose_error_rel > base + options.tolerance:
+            break
+        action, ids, out.tendons, out.realizable = best
+        out.steps.append(Step(action, ids, len(out.tendons), out.realizable.pose_error_rel))
+    return out
+
+
+def _candidates(tendons: list[Tendon], bridges: Bridges):
+    """(action, tendon indices, tendon list) for every drop and every join."""
+    for i in range(len(tendons)):
+        yield "drop", (i,), tendons[:i] + tendons[i + 1:]
+    for i in range(len(tendons)):
+        for j in range(i + 1, len(tendons)):
+            rest = [t for k, t in enumerate(tendons) if k not in (i, j)]
+            for joined in bridges.joins(tendons[i], tendons[j]):
+                yield "join", (i, j), rest + [joined]

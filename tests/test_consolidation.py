@@ -1,0 +1,85 @@
+"""Tendon consolidation: a split tendon is joined back, a useless tendon is
+dropped, needed tendons are kept, and the tolerance bounds the pose lost."""
+
+import numpy as np
+import pytest
+
+from tendon_taichi.consolidation import Bridges, ConsolidationSettings, consolidate
+from tendon_taichi.extraction import FiberView, IdealizedState
+from tendon_taichi.realizable import solve_realizable_poses
+
+
+def _state(p, eq, paths):
+    tau = np.zeros(p.fibers.n_fibers)
+    for f in paths:
+        tau[f] = 0.4
+    return IdealizedState(tau, np.zeros_like(tau), eq.x, 0.01)
+
+
+def _tendons(p, paths, state):
+    """One tendon per fiber path (each path in order, from its first fiber's free end)."""
+    view, out = FiberView(p), []
+    for f in paths:
+        a, b = p.fibers.edges[f[0]]
+        start = int(a) if len(f) == 1 or int(a) not in p.fibers.edges[f[1]] else int(b)
+        out.append(view.tendon(start, list(f), state))
+    return out
+
+
+def _run(p, tendons, state, tol, gap=3.0):
+    real = solve_realizable_poses(p, tendons, state, p.scene.optimize, "direct")
+    return consolidate(p, tendons, state, p.scene.optimize, real, ConsolidationSettings(tol, gap), "direct")
+
+
+def test_bridge_rejoins_a_split_strand(planted):
+    p, paths, eq = planted
+    st = _state(p, eq, paths)
+    whole = _tendons(p, [paths[1]], st)[0]
+    f = list(whole.fibers)
+    left, right = _tendons(p, [f[:3], f[5:]], st)  # two fibers (one spacing each) left out
+    joined = Bridges(p, st, 3.0).joins(left, right)
+    assert any(set(t.fibers) == set(f) for t in joined)
+    assert Bridges(p, st, 1.5).joins(left, right) == []  # the ends are 2 spacings apart
+
+
+def test_split_tendon_is_joined_and_the_planted_layout_restored(planted):
+    p, paths, eq = planted
+    st = _state(p, eq, paths)
+    f = list(paths[0])
+    pieces = _tendons(p, [f[:3], f[5:], paths[1]], st)  # a two-fiber gap in the arm
+    out = _run(p, pieces, st, tol=1e-3)
+    assert out.extracted_count == 3 and len(out.tendons) == 2
+    assert [s.action for s in out.steps] == ["join"]
+    assert {frozenset(t.fibers) for t in out.tendons} == {frozenset(q) for q in paths}
+    # the planted layout reproduces the goals: joined, it is (nearly) exact, and better than split
+    assert out.realizable.pose_error_rel <= 1e-4 < out.extracted_pose_error_rel
+    assert out.evaluations >= 3
+
+
+def test_useless_tendon_is_dropped_and_needed_ones_kept(planted):
+    p, paths, eq = planted
+    st = _state(p, eq, paths)
+    # one extra fiber in the stem: the planted two already make the pose exactly, so it is not needed
+    mid = p.fibers.nodes[p.fibers.edges].mean(axis=1)
+    extra = int(np.argmin(np.linalg.norm(mid - [0.005, 0.03], axis=1)))
+    assert extra not in np.concatenate(paths)
+    tendons = _tendons(p, [paths[0], paths[1], [extra]], st)
+    out = _run(p, tendons, st, tol=1e-3)
+    assert len(out.tendons) == 2 and [s.action for s in out.steps] == ["drop"]
+    assert out.steps[0].tendons == (2,)
+    assert {frozenset(t.fibers) for t in out.tendons} == {frozenset(q) for q in paths}
+    assert out.realizable.pose_error_rel <= out.extracted_pose_error_rel + 1e-3
+
+
+def test_tolerance_bounds_the_lost_pose_and_negative_disables(planted):
+    p, paths, eq = planted
+    st = _state(p, eq, paths)
+    tendons = _tendons(p, paths, st)
+    kept = _run(p, tendons, st, tol=1e-3)  # each planted tendon is needed: dropping one costs > 0.1 % of L
+    assert len(kept.tendons) == 2 and kept.steps == []
+    loose = _run(p, tendons, st, tol=1.0)  # anything goes: down to the bare body
+    assert len(loose.tendons) == 0 and [s.count for s in loose.steps] == [1, 0]
+    assert loose.realizable.pose_error_rel == pytest.approx(loose.steps[-1].realizable_pose_error_rel)
+    assert loose.realizable.pose_error_rel > kept.realizable.pose_error_rel + 1e-3
+    off = _run(p, tendons, st, tol=-1.0)
+    assert off.tendons == tendons and off.evaluations == 0 and off.steps == []
