@@ -13,7 +13,8 @@ on the realizable robot (:mod:`tendon_taichi.realizable`). Each round tries
 solves the realizable robot for every candidate, and keeps the candidate with
 the lowest realizable pose error, provided that error exceeds the extracted
 layout's by at most ``tolerance`` x L (the rise is cumulative over all
-rounds). It stops when no candidate is within the tolerance. A tendon that
+rounds); a candidate whose robot cannot be solved is skipped. It stops when
+no candidate is within the tolerance. A tendon that
 buys less pose accuracy than ``tolerance`` x L is not worth its motor.
 """
 
@@ -23,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import ConvergenceError
 from .extraction import FiberView, IdealizedState, Tendon
 from .problem import Problem
 from .realizable import RealizableResult, solve_realizable_poses
@@ -67,7 +69,9 @@ class Step:
 class Consolidation:
     """The consolidated ``tendons``, their ``realizable`` robot, and the ``steps``
     taken from the ``extracted_count`` tendons whose realizable pose error was
-    ``extracted_pose_error_rel``; ``evaluations`` realizable solves were made."""
+    ``extracted_pose_error_rel``; ``evaluations`` candidate layouts were tried, of
+    which ``unsolved`` could not be solved (an equilibrium did not converge) and
+    were skipped."""
 
     tendons: list[Tendon]
     realizable: RealizableResult
@@ -75,11 +79,13 @@ class Consolidation:
     extracted_pose_error_rel: float
     steps: list[Step] = field(default_factory=list)
     evaluations: int = 0
+    unsolved: int = 0
 
     def as_json(self) -> dict:
         return {"extracted_count": self.extracted_count,
                 "extracted_realizable_pose_error_rel": self.extracted_pose_error_rel,
-                "steps": [s.as_json() for s in self.steps], "evaluations": self.evaluations}
+                "steps": [s.as_json() for s in self.steps], "evaluations": self.evaluations,
+                "unsolved": self.unsolved}
 
 
 class Bridges:
@@ -144,8 +150,12 @@ def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, 
     while out.tendons:
         best = None
         for action, ids, cand in _candidates(out.tendons, bridges):
-            r = solve_realizable_poses(problem, cand, state, settings, solver)
             out.evaluations += 1
+            try:
+                r = solve_realizable_poses(problem, cand, state, settings, solver)
+            except ConvergenceError:  # a layout whose robot cannot be solved is not proven: skip it
+                out.unsolved += 1
+                continue
             if best is None or r.pose_error_rel < best[3].pose_error_rel:
                 best = (action, ids, cand, r)
         if best is None or best[3].pose_error_rel > base + options.tolerance:

@@ -83,3 +83,27 @@ def test_tolerance_bounds_the_lost_pose_and_negative_disables(planted):
     assert loose.realizable.pose_error_rel > kept.realizable.pose_error_rel + 1e-3
     off = _run(p, tendons, st, tol=-1.0)
     assert off.tendons == tendons and off.evaluations == 0 and off.steps == []
+
+
+def test_a_candidate_that_cannot_be_solved_is_skipped(planted, monkeypatch):
+    """The split-tendon case again, with every layout of fewer than three tendons but
+    the planted one unsolvable: the join is still found, the drops are skipped."""
+    import tendon_taichi.consolidation as cons
+    from tendon_taichi.errors import ConvergenceError
+
+    p, paths, eq = planted
+    st = _state(p, eq, paths)
+    f = list(paths[0])
+    pieces = _tendons(p, [f[:3], f[5:], paths[1]], st)
+    planted_sets = {frozenset(q) for q in paths}
+
+    def solve(problem, tendons, *args):
+        if len(tendons) < 3 and {frozenset(t.fibers) for t in tendons} != planted_sets:
+            raise ConvergenceError("equilibrium did not converge (test)")
+        return solve_realizable_poses(problem, tendons, *args)
+
+    monkeypatch.setattr(cons, "solve_realizable_poses", solve)
+    out = _run(p, pieces, st, tol=1e-3)
+    assert [s.action for s in out.steps] == ["join"]
+    assert {frozenset(t.fibers) for t in out.tendons} == planted_sets
+    assert out.unsolved >= 3 and out.as_json()["unsolved"] == out.unsolved
