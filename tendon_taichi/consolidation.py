@@ -14,8 +14,8 @@ solves the realizable robot for every candidate, and keeps the candidate with
 the lowest realizable pose error, provided that error exceeds the extracted
 layout's by at most ``tolerance`` x L (the rise is cumulative over all
 rounds); a candidate whose robot cannot be solved is skipped. It stops when
-no candidate is within the tolerance. A tendon that
-buys less pose accuracy than ``tolerance`` x L is not worth its motor.
+no candidate is within the tolerance. A tendon that buys less pose accuracy
+than ``tolerance`` x L is not worth its motor.
 """
 
 from __future__ import annotations

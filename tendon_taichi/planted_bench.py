@@ -6,10 +6,11 @@ layout ``NAME.json`` (``tendons`` with their rest ``waypoints``, ``length``,
 ``planted_length``). Each case runs ``optimize`` and then every extractor,
 each followed by consolidation, on the last stage, and is scored against what
 was planted: pose error, active length / planted length, tendon count /
-planted count, kinks, worst capstan factor, realizable pose error, time. A case passes when its best extractor
-(the lowest realizable pose error among those that find at most planted + 1
-tendons) finds at most planted + 1 tendons, with a realizable pose error of
-at most 1 % of L, and the active length is at most twice the planted one.
+planted count, kinks, worst capstan factor, realizable pose error, time. A
+case passes when its best extractor (the lowest realizable pose error among
+those that find at most planted + 1 tendons) finds at most planted + 1
+tendons, with a realizable pose error of at most 1 % of L, and the active
+length is at most twice the planted one.
 
 Cases are independent and described by plain data (:func:`run_case` takes a
 path, a level and settings, and returns a JSON-able dict), so that a sweep
@@ -130,7 +131,8 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
             "pose_error_rel": final["pose_error_rel"], "active_fibers": final["active_fibers"],
             "active_length": final["active_length"], "length_ratio": length_ratio,
             "stages": len(run.stages), "extractors": per, "best": best,
-            "count": b.get("count"), "extracted_count": b.get("extracted_count"), "count_ratio": (b["count"] / planted_count) if best else None,
+            "count": b.get("count"), "extracted_count": b.get("extracted_count"),
+            "count_ratio": (b["count"] / planted_count) if best else None,
             "realizable_pose_error_rel": b.get("realizable_pose_error_rel"),
             "kinks": b.get("kinks"), "capstan_worst": b.get("capstan_worst"),
             "passed": passed, "optimize_s": t_opt, "time_s": time.perf_counter() - t0,
@@ -153,9 +155,9 @@ def totals(cases: list[dict]) -> dict:
             "time_s": float(sum(c.get("time_s", 0.0) for c in cases))}
 
 
-CSV_COLUMNS = ("case", "scene", "level", "planted_count", "count", "extracted_count", "best", "planted_length", "active_length",
-               "length_ratio", "pose_error_rel", "realizable_pose_error_rel", "kinks", "capstan_worst",
-               "passed", "time_s", "error")
+CSV_COLUMNS = ("case", "scene", "level", "planted_count", "count", "extracted_count", "best", "planted_length",
+               "active_length", "length_ratio", "pose_error_rel", "realizable_pose_error_rel", "kinks",
+               "capstan_worst", "passed", "time_s", "error")
 
 
 def write_outputs(result: dict, out_dir: Path, suite: list[Case]) -> None:

@@ -103,5 +103,3 @@ def planted():
     eq = NewtonSolver(model, "direct").solve(ac=0.08 * np.array([t.length for t in tendons]))
     p = replace(base, target_goal=base.target_positions(eq.x))
     return p, paths, eq
-
-
