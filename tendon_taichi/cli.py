@@ -358,10 +358,9 @@ def _add_consolidation_flags(p: argparse.ArgumentParser) -> None:
 def _consolidation(args):
     from .consolidation import ConsolidationSettings
 
-    if args.consolidate_tol < 0 or not math.isfinite(args.consolidate_tol):
-        raise InputError(f"--consolidate-tol must be a finite number >= 0 (got {args.consolidate_tol})")
-    if args.join_gap < 0 or not math.isfinite(args.join_gap):
-        raise InputError(f"--join-gap must be a finite number >= 0 (got {args.join_gap})")
+    for flag, value in (("--consolidate-tol", args.consolidate_tol), ("--join-gap", args.join_gap)):
+        if value < 0 or not math.isfinite(value):
+            raise InputError(f"{flag} must be a finite number >= 0 (got {value})")
     return ConsolidationSettings(-1.0 if args.no_consolidate else args.consolidate_tol, args.join_gap)
 
 

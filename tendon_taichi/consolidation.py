@@ -101,9 +101,6 @@ class Bridges:
         n, e = len(f.nodes), f.edges
         self.graph = csr_matrix((np.r_[f.a0, f.a0], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
                                 shape=(n, n))
-        self.fiber_of = {}
-        for i, (a, b) in enumerate(e):
-            self.fiber_of[int(a), int(b)] = self.fiber_of[int(b), int(a)] = i
 
     def joins(self, a: Tendon, b: Tendon) -> list[Tendon]:
         """Every join of ``a`` and ``b`` end to end (up to four: either end of each)
@@ -134,8 +131,12 @@ class Bridges:
         path = [int(w) for w in na] + bridge[::-1][1:-1] + [int(w) for w in nb]
         if len(set(path)) != len(path):
             return None
-        fibers = [self.fiber_of[path[k], path[k + 1]] for k in range(len(path) - 1)]
+        fibers = [self._fiber(path[k], path[k + 1]) for k in range(len(path) - 1)]
         return self.view.tendon(path[0], fibers, self.state)
+
+    def _fiber(self, u: int, w: int) -> int:
+        """The fiber joining fiber nodes u and w (neighbours on a path)."""
+        return next(int(f) for f in self.view.incident(u) if self.view.other(int(f), u) == w)
 
 
 def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings: OptimizeSettings,
