@@ -159,6 +159,8 @@ OPTIMIZE_FLAGS = {
     "--active-threshold": ("active_threshold", float, "active if tau > this x tau_ref"),
     "--sparsity-measure": ("sparsity_measure", str, "length (default) or count"),
     "--continuity-measure": ("continuity_measure", str, "length (default) or count"),
+    "--strand-end-measure": ("strand_end_measure", str, "tension (squared imbalance, default) or count "
+                                                        "(smooth L0: each end costs w_end)"),
     "--stage-iterations": ("stage_iterations", int, "L-BFGS-B iteration cap per stage"),
     "--settle-tol": ("settle_tol", float, "a stage ends when the objective fell by less than this x its "
                                           "start value over the settle window"),
@@ -345,23 +347,28 @@ def _extraction_output(args, ex) -> int:
 
 
 def _add_consolidation_flags(p: argparse.ArgumentParser) -> None:
-    from .consolidation import GAP, TOLERANCE
+    from .consolidation import BUDGET, GAP, TOLERANCE
 
     p.add_argument("--consolidate-tol", type=float, default=TOLERANCE, metavar="F",
                    help="drop or join extracted tendons while the realizable pose error rises by at most "
                         f"F x L in all (default {TOLERANCE:g}; README 'Consolidation')")
-    p.add_argument("--join-gap", type=float, default=GAP, metavar="S",
-                   help=f"join two tendons whose ends are at most S lattice spacings apart (default {GAP:g})")
+    p.add_argument("--consolidate-budget", type=float, default=BUDGET, metavar="F",
+                   help="... or while it stays within F x L, the pose error you accept anyway "
+                        f"(default {BUDGET:g}; 0: none)")
+    p.add_argument("--join-gap", type=float, default=GAP, metavar="F",
+                   help=f"join two tendons whose ends are at most F x L apart (default {GAP:g})")
     p.add_argument("--no-consolidate", action="store_true", help="keep the extracted tendons as they are")
 
 
 def _consolidation(args):
     from .consolidation import ConsolidationSettings
 
-    for flag, value in (("--consolidate-tol", args.consolidate_tol), ("--join-gap", args.join_gap)):
+    for flag, value in (("--consolidate-tol", args.consolidate_tol), ("--consolidate-budget", args.consolidate_budget),
+                        ("--join-gap", args.join_gap)):
         if value < 0 or not math.isfinite(value):
             raise InputError(f"{flag} must be a finite number >= 0 (got {value})")
-    return ConsolidationSettings(-1.0 if args.no_consolidate else args.consolidate_tol, args.join_gap)
+    return ConsolidationSettings(-1.0 if args.no_consolidate else args.consolidate_tol, args.join_gap,
+                                 args.consolidate_budget)
 
 
 def cmd_extract(args) -> int:

@@ -6,16 +6,22 @@ so after extraction the engine greedily reduces the count, proving every step
 on the realizable robot (:mod:`tendon_taichi.realizable`). Each round tries
 
 * **drop** one tendon, and
-* **join** two tendons whose ends lie within ``gap`` lattice spacings (rest
-  coordinates), bridged by the shortest fiber path between those ends - one
-  cable, one tension;
+* **join** two tendons whose ends lie within ``gap`` x L (rest coordinates),
+  bridged by the shortest fiber path between those ends - one cable, one
+  tension;
 
 solves the realizable robot for every candidate, and keeps the candidate with
-the lowest realizable pose error, provided that error exceeds the extracted
-layout's by at most ``tolerance`` x L (the rise is cumulative over all
-rounds); a candidate whose robot cannot be solved is skipped. It stops when
-no candidate is within the tolerance. A tendon that buys less pose accuracy
-than ``tolerance`` x L is not worth its motor.
+the lowest realizable pose error, provided that error is at most the larger of
+
+* the extracted layout's error plus ``tolerance`` x L (the rise is cumulative
+  over all rounds): a tendon that buys less pose accuracy than that is not
+  worth its motor, and
+* ``budget`` x L, the pose error the designer accepts anyway: while the pose
+  is within it, fewer tendons are better;
+
+a candidate whose robot cannot be solved is skipped. It stops when no
+candidate is within that bound. Both bounds and the reach are fractions of the
+body size, so they mean the same at every resolution.
 """
 
 from __future__ import annotations
@@ -30,19 +36,24 @@ from .problem import Problem
 from .realizable import RealizableResult, solve_realizable_poses
 from .scene import OptimizeSettings
 
-#: defaults (fraction of L; lattice spacings)
+#: defaults (fractions of the body size L)
 TOLERANCE = 1.0e-3
-GAP = 3.0
+BUDGET = 5.0e-3
+GAP = 0.2
 
 
 @dataclass(frozen=True)
 class ConsolidationSettings:
     """``tolerance``: allowed cumulative rise of the realizable pose error, as a
     fraction of L (negative: keep the extracted tendons as they are); ``gap``:
-    farthest two tendon ends may be apart to be joined, in lattice spacings."""
+    farthest two tendon ends may be apart to be joined, as a fraction of L;
+    ``budget``: a realizable pose error (fraction of L) the designer accepts
+    anyway - a candidate within it is kept even when the error rises by more
+    than ``tolerance`` (0: no budget)."""
 
     tolerance: float = TOLERANCE
     gap: float = GAP
+    budget: float = BUDGET
 
     @property
     def enabled(self) -> bool:
@@ -89,7 +100,8 @@ class Consolidation:
 
 
 class Bridges:
-    """Joins of two tendons through the fiber lattice (rest coordinates)."""
+    """Joins of two tendons through the fiber lattice (rest coordinates); ``gap``
+    is the reach as a fraction of the body size."""
 
     def __init__(self, problem: Problem, state: IdealizedState, gap: float):
         from scipy.sparse import csr_matrix
@@ -97,7 +109,7 @@ class Bridges:
         f = problem.fibers
         self.view = FiberView(problem)
         self.state = state
-        self.reach = gap * f.spacing
+        self.reach = gap * problem.size
         n, e = len(f.nodes), f.edges
         self.graph = csr_matrix((np.r_[f.a0, f.a0], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
                                 shape=(n, n))
@@ -148,6 +160,7 @@ def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, 
     if not options.enabled:
         return out
     bridges = Bridges(problem, state, options.gap)
+    bound = max(base + options.tolerance, options.budget)
     while out.tendons:
         best = None
         for action, ids, cand in _candidates(out.tendons, bridges):
@@ -159,7 +172,7 @@ def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, 
                 continue
             if best is None or r.pose_error_rel < best[3].pose_error_rel:
                 best = (action, ids, cand, r)
-        if best is None or best[3].pose_error_rel > base + options.tolerance:
+        if best is None or best[3].pose_error_rel > bound:
             break
         action, ids, out.tendons, out.realizable = best
         out.steps.append(Step(action, ids, len(out.tendons), out.realizable.pose_error_rel))

@@ -18,7 +18,11 @@ through one adjoint solve.
   over the fiber nodes ``v`` outside the clamped band, ``T1 >= T2 >= ...`` the
   tensions of the fibers meeting at ``v``: zero inside a clean strand (two equal
   tensions), positive at a strand's end, a star or a tension jump - so each
-  extra tendon costs, and hinges of short fibers become expensive;
+  extra tendon costs, and hinges of short fibers become expensive. With the
+  ``"count"`` measure it is a smooth L0 of the same imbalance,
+  ``O_end = w_end sum_v s_(k^2)(E_v)``, ``E_v = (T1 - T2)^2 + (T3 + T4 + ...)^2``:
+  every end at least ``k`` (the sparsity's homotopy parameter) out of balance
+  costs ``w_end`` whatever its tension - a count of strand ends;
 * ``effort``: ``O_eff = w_eff sum_i (a0_i / L) tau_i / tau_ref``, the actuation
   effort (tension times length): antagonist fibers pulling against each other
   (co-contraction) cost, so fibers that need not pull are paid out.
@@ -173,15 +177,19 @@ class EffortTerm:
 
 
 class StrandEndTerm:
-    """O_end = weight sum_v ((T1 - T2)^2 + (T3 + ...)^2) / tau_ref^2 over fiber nodes
-    away from the clamped band (a node whose triangle has a clamped corner does not
-    count: tendons may end at the base, where motors sit)."""
+    """O_end = weight sum_v E_v / tau_ref^2 (``measure`` "tension") or weight sum_v
+    s_(k^2)(E_v) (``measure`` "count"; ``k`` in N, set per homotopy stage) with
+    ``E_v = (T1 - T2)^2 + (T3 + ...)^2`` (N^2) over the fiber nodes away from the
+    clamped band (a node whose triangle has a clamped corner does not count:
+    tendons may end at the base, where motors sit)."""
 
     name = "strand_end"
 
-    def __init__(self, problem: Problem, weight: float, tension_scale: float):
+    def __init__(self, problem: Problem, weight: float, tension_scale: float, measure: str = "tension",
+                 k: float = 1.0):
         fib = problem.fibers
-        self.weight = weight / tension_scale ** 2
+        self.count, self.k = measure == "count", k
+        self.weight = weight if self.count else weight / tension_scale ** 2
         self.n_fibers = fib.n_fibers
         free = ~problem.fixed[problem.mesh.triangles[fib.embedding.tri]].any(axis=1)  # (k,)
         start, ids = fib.incidence
@@ -201,13 +209,18 @@ class StrandEndTerm:
         Ts = np.take_along_axis(T, order, axis=1)
         jump = Ts[:, 0] - Ts[:, 1]
         rest = Ts[:, 2:].sum(axis=1)
-        value = self.weight * float(np.dot(jump, jump) + np.dot(rest, rest))
-        g = np.empty_like(Ts)  # d/dTs
+        E = jump * jump + rest * rest  # (V,)
+        g = np.empty_like(Ts)  # dE/dTs
         g[:, 0], g[:, 1] = 2.0 * jump, -2.0 * jump
         g[:, 2:] = 2.0 * rest[:, None]
+        if self.count:
+            s, ds = smoothstep(E, self.k * self.k)
+            value, g = float(s.sum()), g * ds[:, None]
+        else:
+            value = float(E.sum())
         fib_sorted = np.take_along_axis(self.incident, order, axis=1)
         dtau = np.bincount(fib_sorted.ravel(), self.weight * g.ravel(), self.n_fibers + 1)[:-1]
-        return TermValue(value, dtau=dtau)
+        return TermValue(self.weight * value, dtau=dtau)
 
 
 @dataclass

@@ -213,7 +213,7 @@ class SoftIK:
             terms = [PoseTerm(problem),
                      SparsityTerm(problem, s.sparsity, s.sparsity_measure, s.homotopy.k0),
                      ContinuityTerm(problem, s.continuity, s.tension_scale, s.continuity_measure),
-                     StrandEndTerm(problem, s.strand_end, s.tension_scale),
+                     StrandEndTerm(problem, s.strand_end, s.tension_scale, s.strand_end_measure, s.homotopy.k0),
                      ContractionTerm(a0, s.contraction_reg),
                      EffortTerm(problem, s.effort, s.tension_scale)]
         else:
@@ -237,6 +237,7 @@ class SoftIK:
         active = {"pose", "contraction"}
         if k is not None:
             self.objective.term("sparsity").k = k
+            self.objective.term("strand_end").k = k
             active |= {"sparsity", "continuity", "strand_end", "effort"}
         self.objective.active = active
         self._last = None

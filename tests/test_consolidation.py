@@ -1,5 +1,6 @@
 """Tendon consolidation: a split tendon is joined back, a useless tendon is
-dropped, needed tendons are kept, and the tolerance bounds the pose lost."""
+dropped, needed tendons are kept, the tolerance bounds the pose lost, and the
+budget buys fewer tendons within it."""
 
 import numpy as np
 import pytest
@@ -26,9 +27,15 @@ def _tendons(p, paths, state):
     return out
 
 
-def _run(p, tendons, state, tol, gap=3.0):
+def _spacings(p, n):
+    """``n`` lattice spacings as a fraction of the body size (the unit of ``gap``)."""
+    return n * p.fibers.spacing / p.size
+
+
+def _run(p, tendons, state, tol, budget=0.0):
     real = solve_realizable_poses(p, tendons, state, p.scene.optimize, "direct")
-    return consolidate(p, tendons, state, p.scene.optimize, real, ConsolidationSettings(tol, gap), "direct")
+    settings = ConsolidationSettings(tol, _spacings(p, 3.0), budget)
+    return consolidate(p, tendons, state, p.scene.optimize, real, settings, "direct")
 
 
 def test_bridge_rejoins_a_split_strand(planted):
@@ -37,9 +44,9 @@ def test_bridge_rejoins_a_split_strand(planted):
     whole = _tendons(p, [paths[1]], st)[0]
     f = list(whole.fibers)
     left, right = _tendons(p, [f[:3], f[5:]], st)  # two fibers (one spacing each) left out
-    joined = Bridges(p, st, 3.0).joins(left, right)
+    joined = Bridges(p, st, _spacings(p, 3.0)).joins(left, right)
     assert any(set(t.fibers) == set(f) for t in joined)
-    assert Bridges(p, st, 1.5).joins(left, right) == []  # the ends are 2 spacings apart
+    assert Bridges(p, st, _spacings(p, 1.5)).joins(left, right) == []  # the ends are 2 spacings apart
 
 
 def test_split_tendon_is_joined_and_the_planted_layout_restored(planted):
@@ -83,6 +90,23 @@ def test_tolerance_bounds_the_lost_pose_and_negative_disables(planted):
     assert loose.realizable.pose_error_rel > kept.realizable.pose_error_rel + 1e-3
     off = _run(p, tendons, st, tol=-1.0)
     assert off.tendons == tendons and off.evaluations == 0 and off.steps == []
+
+
+def test_budget_buys_fewer_tendons_within_it(planted):
+    """Each planted tendon is needed for an exact pose, but with a budget that covers
+    the error of the better one alone, that one is what is kept."""
+    p, paths, eq = planted
+    st = _state(p, eq, paths)
+    tendons = _tendons(p, paths, st)
+    alone = [solve_realizable_poses(p, [t], st, p.scene.optimize, "direct").pose_error_rel for t in tendons]
+    best = int(np.argmin(alone))
+    assert 1e-3 < alone[best] < 0.05  # more than the tolerance allows, so only the budget can buy it
+    out = _run(p, tendons, st, tol=1e-3, budget=1.01 * alone[best])
+    assert [s.action for s in out.steps] == ["drop"] and len(out.tendons) == 1
+    assert set(out.tendons[0].fibers) == set(paths[best])
+    assert out.realizable.pose_error_rel == pytest.approx(alone[best], rel=1e-9)
+    short = _run(p, tendons, st, tol=1e-3, budget=0.99 * alone[best])
+    assert len(short.tendons) == 2 and short.steps == []
 
 
 def test_a_candidate_that_cannot_be_solved_is_skipped(planted, monkeypatch):

@@ -66,6 +66,51 @@ def test_strand_end_term_counts_ends_stars_and_jumps(t_shape_1):
     assert np.dot(tv.dtau, d) == pytest.approx(fd, rel=1e-6)
 
 
+def test_strand_end_count_measure_counts_ends_whatever_their_tension(t_shape_1):
+    """The smooth L0 form: an end out of balance by at least k costs the weight, an
+    inner node of a clean strand nothing; below k the smoothstep of E / k^2."""
+    p = t_shape_1
+    term = StrandEndTerm(p, 2.0, 0.5, "count", k=0.2)
+    fib = p.fibers
+    y = fib.nodes[:, 1].max() - fib.spacing
+    row = np.flatnonzero((np.abs(fib.nodes[:, 1] - y) < 1e-9) & (fib.nodes[:, 0] > 0))
+    row = row[np.argsort(fib.nodes[row, 0])][:5]
+    strand = [int(np.flatnonzero((fib.edges == [a, b]).all(1) | (fib.edges == [b, a]).all(1))[0])
+              for a, b in zip(row[:-1], row[1:])]
+    x = p.mesh.nodes
+    for t in (0.3, 3.0):  # two ends cost 2 x weight, at any tension above k
+        tau = np.zeros(fib.n_fibers)
+        tau[strand] = t
+        assert term.evaluate(State(x, tau, tau)).value == pytest.approx(2 * 2.0)
+    tau[strand] = 0.1  # E = 0.01 = k^2 / 4: each end costs s(1/4) = 5/32
+    assert term.evaluate(State(x, tau, tau)).value == pytest.approx(2 * 2.0 * 5 / 32)
+    rng = np.random.default_rng(3)
+    tau = rng.uniform(0, 0.3, fib.n_fibers) * (rng.uniform(size=fib.n_fibers) < 0.3)
+    tv = term.evaluate(State(x, tau, tau))
+    d, h = rng.standard_normal(fib.n_fibers) * (tau > 0), 1e-7
+    fd = (term.evaluate(State(x, tau, tau + h * d)).value - term.evaluate(State(x, tau, tau - h * d)).value) / (2 * h)
+    assert abs(fd) > 1e-3 and np.dot(tv.dtau, d) == pytest.approx(fd, rel=1e-6)
+
+
+@pytest.mark.parametrize("solver", ["cg", "direct"])
+def test_adjoint_gradient_of_the_strand_end_count(t_shape_1, solver):
+    p = t_shape_1
+    ik = SoftIK(p, replace(p.scene.optimize, strand_end=1e-4, strand_end_measure="count"), solver)
+    ik.eval_tol = 1e-13
+    ik.configure(0.4)
+    ik.objective.active = {"strand_end"}
+    rng = np.random.default_rng(7)
+    r = rng.uniform(-0.05, 0.12, p.fibers.n_fibers)
+    ik.restart(r)
+    f, g = ik.evaluate(r)
+    assert ik.objective.term("strand_end").k == 0.4 and 0 < f < 1e-4 * len(p.fibers.nodes)
+    for trial in range(2):
+        d = rng.standard_normal(len(r))
+        fd = objective_fd(ik, r, d)
+        assert abs(fd - np.dot(g, d)) <= 1e-5 * abs(fd), (fd, np.dot(g, d))
+        assert abs(fd) > 1e-9
+
+
 def test_smoothstep():
     t = np.array([-1.0, 0.0, 0.25, 0.5, 1.0, 2.0])
     s, ds = smoothstep(t, 1.0)
