@@ -134,8 +134,9 @@ class OptimizeSettings:
     (x tau_ref); ``sparsity_measure`` and ``continuity_measure`` are
     ``"length"`` (resolution independent, default) or ``"count"`` (the
     paper's literal sums); ``strand_end_measure`` is ``"tension"`` (the
-    squared imbalance, default) or ``"count"`` (a smooth L0 count of ends). A stage has settled - and ends - when over the last
-    ``settle_window`` L-BFGS-B iterations the objective fell by less than
+    squared imbalance, default) or ``"count"`` (a smooth L0 count of ends).
+    A stage has settled - and ends - when over the last ``settle_window``
+    L-BFGS-B iterations the objective fell by less than
     ``settle_tol`` times its value at the stage's start (and, from stage 1 on,
     the active set did not change); ``stage_iterations`` caps a stage anyway.
     """
