@@ -168,6 +168,9 @@ def dask_cluster(tmp_path_factory):
                                            str(sched_file), "--nthreads", "1", "--nworkers", "1",
                                            "--host", "127.0.0.1"],
                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        from distributed import Client
+        with Client(address, timeout=30) as c:  # both workers registered, so the engine sees 2
+            c.wait_for_workers(2, timeout=120)
         yield address
     finally:
         for p in reversed(procs):
