@@ -12,6 +12,7 @@ import sys
 import time
 
 import pytest
+from distributed import Client
 
 from conftest import run_cli
 from tendon_taichi.cluster import case_id
@@ -168,7 +169,6 @@ def dask_cluster(tmp_path_factory):
                                            str(sched_file), "--nthreads", "1", "--nworkers", "1",
                                            "--host", "127.0.0.1"],
                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        from distributed import Client
         with Client(address, timeout=30) as c:  # both workers registered, so the engine sees 2
             c.wait_for_workers(2, timeout=120)
         yield address
@@ -186,14 +186,11 @@ def test_existing_cluster_gives_the_same_figures(sweep_file, in_process, dask_cl
     result, err = _sweep(sweep_file, tmp_path / "out", "--scheduler", dask_cluster)
     assert result["engine"]["kind"] == "scheduler" and result["engine"]["workers"] == 2
     assert_same_figures(result["cases"], in_process)
-    from distributed import Client
     with Client(dask_cluster, timeout=10) as c:  # the command left the cluster running
         assert len(c.scheduler_info()["workers"]) == 2
 
 
 def test_a_worker_killed_mid_case_is_retried(sweep_file, in_process, dask_cluster, tmp_path):
-    from distributed import Client
-
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "tendon_taichi", "sweep", str(sweep_file), "--out", str(out),
                              "--scheduler", dask_cluster, "--json"],
