@@ -3,7 +3,8 @@
 An extractor reads strands off the idealized tensions; it does not know what a
 tendon costs. A designer pays for every tendon (a motor, an anchor, routing),
 so after extraction the engine greedily reduces the count, proving every step
-on the realizable robot (:mod:`tendon_taichi.realizable`). Each round tries
+on the realizable robot (:mod:`tendon_taichi.realizable`). Each reduction
+round tries
 
 * **drop** one tendon, and
 * **join** two tendons whose ends lie within ``gap`` x L (rest coordinates),
@@ -19,14 +20,28 @@ the lowest realizable pose error, provided that error is at most the larger of
 * ``budget`` x L, the pose error the designer accepts anyway: while the pose
   is within it, fewer tendons are better;
 
-a candidate whose robot cannot be solved is skipped. It stops when no
-candidate is within that bound. Both bounds and the reach are fractions of the
-body size, so they mean the same at every resolution.
+a candidate whose robot cannot be solved is skipped. **Refinement** tries
+
+* **trim** one fiber off one end of one tendon, and
+* **extend** one end by one lattice fiber that turns by at most ``MAX_TURN``
+  and reaches a fiber node no tendon uses,
+
+keeps the best, and repeats, at most ``refine`` rounds, while each round
+lowers the realizable pose error by at least ``REFINE_GAIN`` of it (and
+``REFINE_FLOOR`` x L). When the best reduction is outside the bound, it is
+refined, and kept if that brings it within. When no reduction fits, the layout
+left is refined, and if that helped the reductions are tried again. Why: an
+extractor follows the idealized tensions, which the realizable robot - one
+tension per tendon - cannot reproduce exactly, and a dropped tendon's work can
+often be taken over by a neighbour grown a little longer. Both bounds and the
+reach are fractions of the body size, so they mean the same at every resolution.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -40,6 +55,13 @@ from .scene import OptimizeSettings
 TOLERANCE = 1.0e-3
 BUDGET = 5.0e-3
 GAP = 0.2
+REFINE = 12
+#: a refinement step must lower the realizable pose error by this fraction of it ...
+REFINE_GAIN = 0.02
+#: ... and by this fraction of L
+REFINE_FLOOR = 1.0e-5
+#: the sharpest turn (radians) an extension may make at a tendon end
+MAX_TURN = math.pi / 4
 
 
 @dataclass(frozen=True)
@@ -49,11 +71,13 @@ class ConsolidationSettings:
     farthest two tendon ends may be apart to be joined, as a fraction of L;
     ``budget``: a realizable pose error (fraction of L) the designer accepts
     anyway - a candidate within it is kept even when the error rises by more
-    than ``tolerance`` (0: no budget)."""
+    than ``tolerance`` (0: no budget); ``refine``: the most trim / extend rounds
+    in a row (0: no refinement)."""
 
     tolerance: float = TOLERANCE
     gap: float = GAP
     budget: float = BUDGET
+    refine: int = REFINE
 
     @property
     def enabled(self) -> bool:
@@ -62,7 +86,7 @@ class ConsolidationSettings:
 
 @dataclass
 class Step:
-    """One accepted round: ``action`` ('drop' or 'join'), the indices of the tendons
+    """One accepted round: ``action`` ('drop', 'join', 'trim' or 'extend'), the indices of the tendons
     it acted on (in the list before the round), and the count and realizable pose
     error (fraction of L) after it."""
 
@@ -151,35 +175,91 @@ class Bridges:
         return next(int(f) for f in self.view.incident(u) if self.view.other(int(f), u) == w)
 
 
+class Candidate(NamedTuple):
+    """A layout tried: the ``action`` that made it, the indices of the tendons it
+    acted on, the ``tendons`` and their solved ``realizable`` robot."""
+
+    action: str
+    ids: tuple[int, ...]
+    tendons: list[Tendon]
+    realizable: RealizableResult
+
+    @property
+    def error(self) -> float:
+        return self.realizable.pose_error_rel
+
+
+class _Search:
+    """Solves candidate layouts on the realizable robot, counting them in ``out``."""
+
+    def __init__(self, problem, state, settings, solver, out: Consolidation, bridges: Bridges, rounds: int):
+        self.args = (problem, state, settings, solver)
+        self.out, self.bridges, self.rounds = out, bridges, rounds
+
+    def best(self, candidates, start=None) -> Candidate | None:
+        """The candidate with the lowest realizable pose error, or None; ``start``
+        (P, T) warm starts the trims and extensions."""
+        problem, state, settings, solver = self.args
+        best = None
+        for action, ids, tendons in candidates:
+            self.out.evaluations += 1
+            try:
+                r = solve_realizable_poses(problem, tendons, state, settings, solver,
+                                           start if action in ("trim", "extend") else None)
+            except ConvergenceError:  # a layout whose robot cannot be solved is not proven: skip it
+                self.out.unsolved += 1
+                continue
+            if best is None or r.pose_error_rel < best.realizable.pose_error_rel:
+                best = Candidate(action, ids, tendons, r)
+        return best
+
+    def refine(self, tendons: list[Tendon], real: RealizableResult) -> list[Candidate]:
+        """Trims and extensions of ``tendons`` (solved as ``real``), the best each
+        round, while each lowers the pose error enough (module docstring)."""
+        chain = []
+        for _ in range(self.rounds if tendons else 0):
+            now = real.pose_error_rel
+            c = self.best(_refinements(tendons, self.bridges), real.ratios)
+            if c is None or c.error > min((1.0 - REFINE_GAIN) * now, now - REFINE_FLOOR):
+                break
+            chain.append(c)
+            tendons, real = c.tendons, c.realizable
+        return chain
+
+
 def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings: OptimizeSettings,
                 real: RealizableResult, options: ConsolidationSettings, solver: str = "auto") -> Consolidation:
-    """Greedy drops and joins (module docstring) from ``tendons``, whose realizable
-    robot ``real`` is already solved."""
+    """Greedy drops and joins, helped by refinement, then refinement of what is
+    left (module docstring), from ``tendons``, whose realizable robot ``real`` is
+    already solved."""
     base = real.pose_error_rel
     out = Consolidation(list(tendons), real, len(tendons), base)
     if not options.enabled:
         return out
-    bridges = Bridges(problem, state, options.gap)
+    search = _Search(problem, state, settings, solver, out, Bridges(problem, state, options.gap), options.refine)
     bound = max(base + options.tolerance, options.budget)
-    while out.tendons:
-        best = None
-        for action, ids, cand in _candidates(out.tendons, bridges):
-            out.evaluations += 1
-            try:
-                r = solve_realizable_poses(problem, cand, state, settings, solver)
-            except ConvergenceError:  # a layout whose robot cannot be solved is not proven: skip it
-                out.unsolved += 1
-                continue
-            if best is None or r.pose_error_rel < best[3].pose_error_rel:
-                best = (action, ids, cand, r)
-        if best is None or best[3].pose_error_rel > bound:
-            break
-        action, ids, out.tendons, out.realizable = best
-        out.steps.append(Step(action, ids, len(out.tendons), out.realizable.pose_error_rel))
-    return out
+    while True:
+        while out.tendons:
+            c = search.best(_reductions(out.tendons, search.bridges))
+            if c is None:
+                break
+            chain = [c] + (search.refine(c.tendons, c.realizable) if c.error > bound else [])
+            if chain[-1].error > bound:
+                break
+            _accept(out, chain)
+        polish = search.refine(out.tendons, out.realizable)
+        _accept(out, polish)
+        if not polish:
+            return out
 
 
-def _candidates(tendons: list[Tendon], bridges: Bridges):
+def _accept(out: Consolidation, chain: list[Candidate]) -> None:
+    for c in chain:
+        out.tendons, out.realizable = c.tendons, c.realizable
+        out.steps.append(Step(c.action, c.ids, len(c.tendons), c.error))
+
+
+def _reductions(tendons: list[Tendon], bridges: Bridges):
     """(action, tendon indices, tendon list) for every drop and every join."""
     for i in range(len(tendons)):
         yield "drop", (i,), tendons[:i] + tendons[i + 1:]
@@ -188,3 +268,18 @@ def _candidates(tendons: list[Tendon], bridges: Bridges):
             rest = [t for k, t in enumerate(tendons) if k not in (i, j)]
             for joined in bridges.joins(tendons[i], tendons[j]):
                 yield "join", (i, j), rest + [joined]
+
+
+def _refinements(tendons: list[Tendon], bridges: Bridges):
+    """(action, (tendon index,), tendon list) for every trim and every extension
+    of either end of every tendon (module docstring)."""
+    view, state = bridges.view, bridges.state
+    used = {int(v) for t in tendons for v in t.nodes}
+    for i, t in enumerate(tendons):
+        for nodes, fibers in ((list(t.nodes), list(t.fibers)), (list(t.nodes[::-1]), list(t.fibers[::-1]))):
+            start, last, f_in = int(nodes[0]), int(nodes[-1]), int(fibers[-1])  # this pass edits the last end
+            if len(fibers) > 1:
+                yield "trim", (i,), tendons[:i] + [view.tendon(start, fibers[:-1], state)] + tendons[i + 1:]
+            for f in (int(f) for f in view.incident(last)):
+                if f != f_in and view.other(f, last) not in used and view.turn(f_in, last, f) <= MAX_TURN + 1e-9:
+                    yield "extend", (i,), tendons[:i] + [view.tendon(start, fibers + [f], state)] + tendons[i + 1:]

@@ -75,19 +75,23 @@ def warm_ratios(problem: Problem, tendons: list[Tendon], state: IdealizedState,
 
 
 def solve_realizable_poses(problem: Problem, tendons: list[Tendon], state: IdealizedState,
-                           settings: OptimizeSettings, solver: str = "auto") -> RealizableResult:
+                           settings: OptimizeSettings, solver: str = "auto", ratios=None) -> RealizableResult:
     """The realizable robot in every target pose: one layout, its tendon contractions
-    re-solved per pose (warm started from each tendon's mean tension in that pose).
+    re-solved per pose (warm started from ``ratios`` (P, T) c / L0 where given, else
+    from each tendon's mean tension in that pose).
     With several poses the result's pose errors cover every pose's targets,
     ``contraction``, ``ratios`` and ``tau`` are (P, T), ``x`` is the first pose's
     and ``poses`` holds each pose's result."""
+    if ratios is not None:
+        ratios = np.asarray(ratios, dtype=float).reshape(problem.n_poses, len(tendons))
     if problem.n_poses == 1:
-        return solve_realizable(problem, tendons, state, settings, solver)
+        return solve_realizable(problem, tendons, state, settings, solver, start=None if ratios is None else ratios[0])
     t0 = time.perf_counter()
     res = []
     for i, st in enumerate(state.poses):
         tensions = [float(st.tau[t.fibers].mean()) for t in tendons]
-        res.append(solve_realizable(problem.pose(i), tendons, st, settings, solver, tensions))
+        res.append(solve_realizable(problem.pose(i), tendons, st, settings, solver, tensions,
+                                    None if ratios is None else ratios[i]))
     err = np.array([r.pose_error for r in res])
     pe = float(np.sqrt((err ** 2).sum()))
     shape = (len(res), len(tendons))
@@ -99,9 +103,10 @@ def solve_realizable_poses(problem: Problem, tendons: list[Tendon], state: Ideal
 
 
 def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedState,
-                     settings: OptimizeSettings, solver: str = "auto", tensions=None) -> RealizableResult:
+                     settings: OptimizeSettings, solver: str = "auto", tensions=None,
+                     start=None) -> RealizableResult:
     """Solve the realizable robot's tendon contractions for the problem's targets
-    (one pose), warm started from :func:`warm_ratios`."""
+    (one pose), warm started from ``start`` (T,) c / L0, or else :func:`warm_ratios`."""
     t0 = time.perf_counter()
     L = problem.size
     if not tendons:  # the bare body (it sags under gravity, if any)
@@ -110,7 +115,8 @@ def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedSt
         return RealizableResult(np.zeros(0), np.zeros(0), np.zeros(0), x, pe, pe / L, worst,
                                 0, 0, time.perf_counter() - t0)
     ik = SoftIK(problem, settings, solver, cables=tendon_cables(problem, tendons))
-    st = run_stage(ik, 0, warm_ratios(problem, tendons, state, tensions), RunCallbacks())
+    r0 = warm_ratios(problem, tendons, state, tensions) if start is None else np.asarray(start, dtype=float)
+    st = run_stage(ik, 0, r0, RunCallbacks())
     f = st.figures
     return RealizableResult(st.ac, st.r, st.tau, st.x, f.pose_error, f.pose_error_rel, f.pose_error_max,
                             st.iterations, st.evaluations, time.perf_counter() - t0)

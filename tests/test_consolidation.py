@@ -1,6 +1,7 @@
 """Tendon consolidation: a split tendon is joined back, a useless tendon is
-dropped, needed tendons are kept, the tolerance bounds the pose lost, and the
-budget buys fewer tendons within it."""
+dropped, needed tendons are kept, the tolerance bounds the pose lost, the
+budget buys fewer tendons within it, and refinement grows a cut tendon back -
+also to take over from a tendon it lets drop."""
 
 import numpy as np
 import pytest
@@ -32,9 +33,9 @@ def _spacings(p, n):
     return n * p.fibers.spacing / p.size
 
 
-def _run(p, tendons, state, tol, budget=0.0):
+def _run(p, tendons, state, tol, budget=0.0, gap=3.0, refine=12):
     real = solve_realizable_poses(p, tendons, state, p.scene.optimize, "direct")
-    settings = ConsolidationSettings(tol, _spacings(p, 3.0), budget)
+    settings = ConsolidationSettings(tol, _spacings(p, gap), budget, refine)
     return consolidate(p, tendons, state, p.scene.optimize, real, settings, "direct")
 
 
@@ -101,11 +102,12 @@ def test_budget_buys_fewer_tendons_within_it(planted):
     alone = [solve_realizable_poses(p, [t], st, p.scene.optimize, "direct").pose_error_rel for t in tendons]
     best = int(np.argmin(alone))
     assert 1e-3 < alone[best] < 0.05  # more than the tolerance allows, so only the budget can buy it
-    out = _run(p, tendons, st, tol=1e-3, budget=1.01 * alone[best])
+    # no refinement: it would then grow the tendon left (the tests above and below show that)
+    out = _run(p, tendons, st, tol=1e-3, budget=1.01 * alone[best], refine=0)
     assert [s.action for s in out.steps] == ["drop"] and len(out.tendons) == 1
     assert set(out.tendons[0].fibers) == set(paths[best])
     assert out.realizable.pose_error_rel == pytest.approx(alone[best], rel=1e-9)
-    short = _run(p, tendons, st, tol=1e-3, budget=0.99 * alone[best])
+    short = _run(p, tendons, st, tol=1e-3, budget=0.99 * alone[best], refine=0)
     assert len(short.tendons) == 2 and short.steps == []
 
 
@@ -131,3 +133,35 @@ def test_a_candidate_that_cannot_be_solved_is_skipped(planted, monkeypatch):
     assert [s.action for s in out.steps] == ["join"]
     assert {frozenset(t.fibers) for t in out.tendons} == planted_sets
     assert out.unsolved >= 3 and out.as_json()["unsolved"] == out.unsolved
+
+
+def test_refinement_grows_a_cut_tendon_back_to_the_planted_one(planted):
+    """The straight planted tendon with its last two fibers cut off: no drop fits
+    (tolerance 0), and refinement extends it back, fiber by fiber, to the planted
+    layout, which is exact; with ``refine`` 0 nothing changes."""
+    p, paths, eq = planted
+    st = _state(p, eq, paths)
+    tendons = _tendons(p, [paths[0], paths[1][:-2]], st)
+    out = _run(p, tendons, st, tol=0.0)
+    assert [s.action for s in out.steps] == ["extend", "extend"]
+    errors = [out.extracted_pose_error_rel] + [s.realizable_pose_error_rel for s in out.steps]
+    assert all(b < 0.98 * a for a, b in zip(errors, errors[1:]))  # each step gained REFINE_GAIN at least
+    assert {frozenset(t.fibers) for t in out.tendons} == {frozenset(q) for q in paths}
+    assert out.realizable.pose_error_rel <= 1e-4 < out.extracted_pose_error_rel
+    off = _run(p, tendons, st, tol=0.0, refine=0)
+    assert off.steps == [] and off.tendons == tendons
+
+
+def test_refinement_lets_a_tendon_drop_that_a_neighbour_takes_over(planted):
+    """The straight planted tendon cut in two, the short piece (one fiber) out of
+    join reach: dropping it alone loses pose (more than tolerance 0 allows), but
+    with the long piece grown into its place the drop is kept - the planted layout."""
+    p, paths, eq = planted
+    st = _state(p, eq, paths)
+    tendons = _tendons(p, [paths[0], paths[1][:-2], paths[1][-1:]], st)
+    out = _run(p, tendons, st, tol=0.0, gap=0.5)
+    assert [s.action for s in out.steps] == ["drop", "extend", "extend"]
+    assert out.steps[0].tendons == (2,)
+    assert out.steps[0].realizable_pose_error_rel > out.extracted_pose_error_rel  # outside the bound alone
+    assert {frozenset(t.fibers) for t in out.tendons} == {frozenset(q) for q in paths}
+    assert out.realizable.pose_error_rel <= 1e-4 < out.extracted_pose_error_rel
