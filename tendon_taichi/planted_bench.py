@@ -109,6 +109,19 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
     t_opt = time.perf_counter() - t0
     ex = extract(rec, extractors, consolidation=ConsolidationSettings(**(consolidation or {})))
     final = run.summary["final"]
+    length_ratio = final["active_length"] / planted_length if planted_length > 0 else float("inf")
+    return {"case": name, "scene": run.summary.get("scene", scene.name), "level": level,
+            "planted_count": planted_count, "planted_length": planted_length,
+            "pose_error_rel": final["pose_error_rel"], "active_fibers": final["active_fibers"],
+            "active_length": final["active_length"], "length_ratio": length_ratio,
+            "stages": len(run.stages), **score_extraction(ex, planted_count, length_ratio),
+            "optimize_s": t_opt, "time_s": time.perf_counter() - t0, "recording": str(rec)}
+
+
+def score_extraction(ex, planted_count: int, length_ratio: float) -> dict:
+    """A case's extraction figures: ``extractors`` (per extractor: count, lengths,
+    kinks, capstan, realizable pose error, tendons, or its ``error``), the ``best``
+    one (:func:`best_extractor`) and its figures, and whether the case ``passed``."""
     per = {}
     for r in ex.results:
         if r.error is not None:
@@ -121,22 +134,14 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
                        "realizable_pose_error_rel": m["realizable_pose_error_rel"],
                        "tendons": [t.waypoints.tolist() for t in r.tendons]}
     best = best_extractor(per, planted_count)
-    length_ratio = final["active_length"] / planted_length if planted_length > 0 else float("inf")
     b = per.get(best, {})
     passed = bool(best is not None and b["count"] <= planted_count + MAX_EXTRA_TENDONS
                   and b["realizable_pose_error_rel"] <= MAX_REALIZABLE_POSE_REL
                   and length_ratio <= MAX_LENGTH_RATIO)
-    return {"case": name, "scene": run.summary.get("scene", scene.name), "level": level,
-            "planted_count": planted_count, "planted_length": planted_length,
-            "pose_error_rel": final["pose_error_rel"], "active_fibers": final["active_fibers"],
-            "active_length": final["active_length"], "length_ratio": length_ratio,
-            "stages": len(run.stages), "extractors": per, "best": best,
-            "count": b.get("count"), "extracted_count": b.get("extracted_count"),
+    return {"extractors": per, "best": best, "count": b.get("count"), "extracted_count": b.get("extracted_count"),
             "count_ratio": (b["count"] / planted_count) if best else None,
             "realizable_pose_error_rel": b.get("realizable_pose_error_rel"),
-            "kinks": b.get("kinks"), "capstan_worst": b.get("capstan_worst"),
-            "passed": passed, "optimize_s": t_opt, "time_s": time.perf_counter() - t0,
-            "recording": str(rec)}
+            "kinks": b.get("kinks"), "capstan_worst": b.get("capstan_worst"), "passed": passed}
 
 
 def totals(cases: list[dict]) -> dict:

@@ -3,7 +3,7 @@
 Usage: python benchmarks/planted/reextract.py RUN.json OUT.json [--refine N] [--cases NAME ...]
 
 RUN.json is the planted_bench.json of `tendon-taichi planted-bench`; its cases'
-recordings are extracted again (every extractor, consolidation with the default
+recordings are extracted again (every extractor, consolidation with the run's
 bounds and ``--refine N`` refinement steps), without optimizing again, and
 scored by the bench's own rules (best extractor, pass). OUT.json has the same
 shape (``cases``, ``totals``; ``time_s`` is the extraction time), so
@@ -16,8 +16,7 @@ import sys
 import time
 
 from tendon_taichi.consolidation import REFINE, ConsolidationSettings
-from tendon_taichi.planted_bench import (MAX_EXTRA_TENDONS, MAX_LENGTH_RATIO, MAX_REALIZABLE_POSE_REL,
-                                         best_extractor, totals)
+from tendon_taichi.planted_bench import score_extraction, totals
 from tendon_taichi.tendons import extract
 
 
@@ -25,25 +24,8 @@ def rescore(case: dict, consolidation: ConsolidationSettings) -> dict:
     """The case with its extractors re-run on its recording and re-scored."""
     t0 = time.perf_counter()
     ex = extract(case["recording"], record=False, consolidation=consolidation)
-    per = {}
-    for r in ex.results:
-        if r.error is not None:
-            per[r.name] = {"error": r.error}
-            continue
-        m = r.metrics
-        per[r.name] = {"count": int(m["count"]), "extracted_count": int(m["extracted_count"]),
-                       "realizable_pose_error_rel": m["realizable_pose_error_rel"],
-                       "steps": [s.action for s in r.consolidation.steps] if r.consolidation else []}
-    best = best_extractor(per, case["planted_count"])
-    b = per.get(best, {})
-    passed = bool(best is not None and b["count"] <= case["planted_count"] + MAX_EXTRA_TENDONS
-                  and b["realizable_pose_error_rel"] <= MAX_REALIZABLE_POSE_REL
-                  and case["length_ratio"] <= MAX_LENGTH_RATIO)
-    return {**case, "extractors": per, "best": best, "count": b.get("count"),
-            "extracted_count": b.get("extracted_count"),
-            "count_ratio": b["count"] / case["planted_count"] if best else None,
-            "realizable_pose_error_rel": b.get("realizable_pose_error_rel"), "passed": passed,
-            "time_s": time.perf_counter() - t0}
+    figures = score_extraction(ex, case["planted_count"], case["length_ratio"])
+    return {**case, **figures, "time_s": time.perf_counter() - t0}
 
 
 def main(argv=None):
