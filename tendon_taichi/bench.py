@@ -29,7 +29,7 @@ from .optimizer import ADJOINT_TOL, SoftIK
 from .errors import InputError
 from .problem import build_problem
 from .scene import Scene
-from .solvers import DirectSolver, NewtonSolver, resolve_solver
+from .solvers import NewtonSolver, resolve_solver, solve_many
 
 #: seconds-valued figures, in the order of the table and the plot
 TIMINGS = ("equilibrium_cold_s", "equilibrium_warm_s", "adjoint_s", "gradient_s", "forward_sensitivity_s",
@@ -143,13 +143,14 @@ def forward_gradient(ik: SoftIK, r: np.ndarray) -> np.ndarray:
     dOdx[ik.problem.fixed] = 0.0
     n_f = len(r)
     grad = ev.dac[0] + ev.dtau[0] * cab["tau_ac"]
-    lin.solve(dOdx, tol=ADJOINT_TOL)  # prepares (direct: factorizes) the Hessian once
-    direct = isinstance(lin, DirectSolver)
-    for i in range(n_f):
-        e = np.zeros(n_f)
-        e[i] = 1.0
-        rhs = -m.mixed_product(e)
-        s = lin.approx_solve(rhs) if direct else lin.solve(rhs, tol=ADJOINT_TOL, prepare=False)
+    def rhs():
+        yield dOdx  # the first solve prepares (direct: factorizes) the Hessian once
+        for i in range(n_f):
+            yield -m.mixed_product(np.eye(1, n_f, i).ravel())
+
+    sols = solve_many(lin, rhs(), ADJOINT_TOL)
+    next(sols)
+    for i, s in enumerate(sols):
         grad[i] += float((dOdx * s).sum())
     return grad * ik.a0
 

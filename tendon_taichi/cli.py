@@ -347,7 +347,7 @@ def _extraction_output(args, ex) -> int:
 
 
 def _add_consolidation_flags(p: argparse.ArgumentParser) -> None:
-    from .consolidation import BUDGET, GAP, REFINE, TOLERANCE
+    from .consolidation import BUDGET, GAP, REFINE, SCREEN, TOLERANCE
 
     p.add_argument("--consolidate-tol", type=float, default=TOLERANCE, metavar="F",
                    help="drop or join extracted tendons while the realizable pose error rises by at most "
@@ -360,6 +360,9 @@ def _add_consolidation_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--refine", type=int, default=REFINE, metavar="N",
                    help="then trim or extend tendon ends, at most N steps in a row, while that lowers the "
                         f"realizable pose error (default {REFINE}; 0: never)")
+    p.add_argument("--screen", type=int, default=SCREEN, metavar="N",
+                   help="solve in full only the N refinement candidates a Gauss-Newton step predicts best "
+                        f"(default {SCREEN}; 0: solve every one)")
     p.add_argument("--no-consolidate", action="store_true", help="keep the extracted tendons as they are")
 
 
@@ -370,10 +373,11 @@ def _consolidation(args):
                         ("--join-gap", args.join_gap)):
         if value < 0 or not math.isfinite(value):
             raise InputError(f"{flag} must be a finite number >= 0 (got {value})")
-    if args.refine < 0:
-        raise InputError(f"--refine must be an integer >= 0 (got {args.refine})")
+    for flag, value in (("--refine", args.refine), ("--screen", args.screen)):
+        if value < 0:
+            raise InputError(f"{flag} must be an integer >= 0 (got {value})")
     return ConsolidationSettings(-1.0 if args.no_consolidate else args.consolidate_tol, args.join_gap,
-                                 args.consolidate_budget, args.refine)
+                                 args.consolidate_budget, args.refine, args.screen)
 
 
 def cmd_extract(args) -> int:

@@ -28,9 +28,15 @@ a candidate whose robot cannot be solved is skipped. **Refinement** tries
 
 keeps the best, and repeats, at most ``refine`` rounds, while each round
 lowers the realizable pose error by at least ``REFINE_GAIN`` of it (and
-``REFINE_FLOOR`` x L). When the best reduction is outside the bound, it is
-refined, and kept if that brings it within. When no reduction fits, the layout
-left is refined, and if that helped the reductions are tried again. Why: an
+``REFINE_FLOOR`` x L). A round first **screens** its candidates by one
+Gauss-Newton step each from the current layout's solution
+(:func:`~tendon_taichi.realizable.predict_realizable`, a few linear solves
+instead of an L-BFGS-B run), then solves in full, from the predicted
+contractions, only the ``screen`` best predicted, and of those only the ones
+predicted to make the gain a step needs (within ``SCREEN_MARGIN``). When the
+best reduction is outside the bound, it is refined, and kept if that brings it
+within. When no reduction fits, the layout left is refined, and if that
+helped the reductions are tried again. Why: an
 extractor follows the idealized tensions, which the realizable robot - one
 tension per tendon - cannot reproduce exactly, and a dropped tendon's work can
 often be taken over by a neighbour grown a little longer. Both bounds and the
@@ -48,7 +54,7 @@ import numpy as np
 from .errors import ConvergenceError
 from .extraction import FiberView, IdealizedState, Tendon
 from .problem import Problem
-from .realizable import RealizableResult, solve_realizable_poses
+from .realizable import RealizableResult, predict_realizable, solve_realizable_poses
 from .scene import OptimizeSettings
 
 #: defaults (fractions of the body size L)
@@ -62,6 +68,10 @@ REFINE_GAIN = 0.02
 REFINE_FLOOR = 1.0e-5
 #: the sharpest turn (radians) an extension may make at a tendon end
 MAX_TURN = math.pi / 4
+#: refinement candidates solved in full per round (the best screened; 0: all, unscreened)
+SCREEN = 3
+#: ... of those, only the ones whose predicted error is within this fraction of the error a step needs
+SCREEN_MARGIN = 0.1
 
 
 @dataclass(frozen=True)
@@ -72,12 +82,15 @@ class ConsolidationSettings:
     ``budget``: a realizable pose error (fraction of L) the designer accepts
     anyway - a candidate within it is kept even when the error rises by more
     than ``tolerance`` (0: no budget); ``refine``: the most trim / extend rounds
-    in a row (0: no refinement)."""
+    in a row (0: no refinement); ``screen``: how many of a refinement round's
+    candidates, the best by the Gauss-Newton screen, are solved in full (0: every
+    one, unscreened)."""
 
     tolerance: float = TOLERANCE
     gap: float = GAP
     budget: float = BUDGET
     refine: int = REFINE
+    screen: int = SCREEN
 
     @property
     def enabled(self) -> bool:
@@ -104,9 +117,10 @@ class Step:
 class Consolidation:
     """The consolidated ``tendons``, their ``realizable`` robot, and the ``steps``
     taken from the ``extracted_count`` tendons whose realizable pose error was
-    ``extracted_pose_error_rel``; ``evaluations`` candidate layouts were tried, of
-    which ``unsolved`` could not be solved (an equilibrium did not converge) and
-    were skipped."""
+    ``extracted_pose_error_rel``; ``evaluations`` candidate layouts were solved in
+    full, of which ``unsolved`` could not be solved (an equilibrium did not
+    converge) and were skipped; ``screened`` refinement candidates were screened
+    (a candidate whose screen fails counts as unsolved)."""
 
     tendons: list[Tendon]
     realizable: RealizableResult
@@ -115,12 +129,13 @@ class Consolidation:
     steps: list[Step] = field(default_factory=list)
     evaluations: int = 0
     unsolved: int = 0
+    screened: int = 0
 
     def as_json(self) -> dict:
         return {"extracted_count": self.extracted_count,
                 "extracted_realizable_pose_error_rel": self.extracted_pose_error_rel,
                 "steps": [s.as_json() for s in self.steps], "evaluations": self.evaluations,
-                "unsolved": self.unsolved}
+                "unsolved": self.unsolved, "screened": self.screened}
 
 
 class Bridges:
@@ -192,20 +207,22 @@ class Candidate(NamedTuple):
 class _Search:
     """Solves candidate layouts on the realizable robot, counting them in ``out``."""
 
-    def __init__(self, problem, state, settings, solver, out: Consolidation, bridges: Bridges, rounds: int):
+    def __init__(self, problem, state, settings, solver, out: Consolidation, bridges: Bridges,
+                 options: ConsolidationSettings):
         self.args = (problem, state, settings, solver)
-        self.out, self.bridges, self.rounds = out, bridges, rounds
+        self.out, self.bridges = out, bridges
+        self.rounds, self.screen = options.refine, options.screen
 
-    def best(self, candidates, start=None) -> Candidate | None:
-        """The candidate with the lowest realizable pose error, or None; ``start``
-        (P, T) warm starts the trims and extensions."""
+    def best(self, candidates, starts=None) -> Candidate | None:
+        """The candidate with the lowest realizable pose error, or None; ``starts``
+        (one (P, T) array or None per candidate) warm starts their solves."""
         problem, state, settings, solver = self.args
         best = None
-        for action, ids, tendons in candidates:
+        candidates = list(candidates)
+        for (action, ids, tendons), start in zip(candidates, starts or [None] * len(candidates)):
             self.out.evaluations += 1
             try:
-                r = solve_realizable_poses(problem, tendons, state, settings, solver,
-                                           start if action in ("trim", "extend") else None)
+                r = solve_realizable_poses(problem, tendons, state, settings, solver, start)
             except ConvergenceError:  # a layout whose robot cannot be solved is not proven: skip it
                 self.out.unsolved += 1
                 continue
@@ -219,12 +236,35 @@ class _Search:
         chain = []
         for _ in range(self.rounds if tendons else 0):
             now = real.pose_error_rel
-            c = self.best(_refinements(tendons, self.bridges), real.ratios)
-            if c is None or c.error > min((1.0 - REFINE_GAIN) * now, now - REFINE_FLOOR):
+            need = min((1.0 - REFINE_GAIN) * now, now - REFINE_FLOOR)
+            candidates = list(_refinements(tendons, self.bridges))
+            if self.screen:
+                candidates, starts = self._screened(candidates, real, need)
+            else:
+                starts = [real.ratios] * len(candidates)
+            c = self.best(candidates, starts)
+            if c is None or c.error > need:
                 break
             chain.append(c)
             tendons, real = c.tendons, c.realizable
         return chain
+
+    def _screened(self, candidates: list, real: RealizableResult, need: float) -> tuple[list, list]:
+        """The candidates worth a full solve, and their predicted contractions: the
+        ``screen`` best by :func:`predict_realizable` from ``real``, each predicted
+        within ``SCREEN_MARGIN`` of ``need``."""
+        problem, _, settings, solver = self.args
+        positions = [real.x] if real.poses is None else [p.x for p in real.poses]
+        scored = []
+        for c in candidates:
+            self.out.screened += 1
+            try:
+                scored.append((*predict_realizable(problem, c[2], settings, real.ratios, positions, solver), c))
+            except ConvergenceError:
+                self.out.unsolved += 1
+        scored.sort(key=lambda s: s[0])
+        kept = [s for s in scored[:self.screen] if s[0] <= (1.0 + SCREEN_MARGIN) * need]
+        return [s[2] for s in kept], [s[1] for s in kept]
 
 
 def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings: OptimizeSettings,
@@ -236,7 +276,7 @@ def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, 
     out = Consolidation(list(tendons), real, len(tendons), base)
     if not options.enabled:
         return out
-    search = _Search(problem, state, settings, solver, out, Bridges(problem, state, options.gap), options.refine)
+    search = _Search(problem, state, settings, solver, out, Bridges(problem, state, options.gap), options)
     bound = max(base + options.tolerance, options.budget)
     while True:
         while out.tendons:

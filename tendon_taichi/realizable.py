@@ -2,7 +2,11 @@
 tendons, each a sliding cable through its waypoints (the fiber nodes it
 follows) with one rest length and one tension. Its tendon contractions are
 found by the same soft IK as the idealized robot (pose objective, bounds
-[-pmax, cmax] on c / L0, adjoint gradient) - a handful of variables."""
+[-pmax, cmax] on c / L0, adjoint gradient) - a handful of variables.
+
+:func:`predict_realizable` estimates a layout's realizable pose error far more
+cheaply, by one Gauss-Newton step from a nearby solved layout; consolidation
+uses it to screen small edits before solving the promising ones in full."""
 
 from __future__ import annotations
 
@@ -10,15 +14,16 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import lsq_linear
 
 from .cables import CableSet
 from .extraction import IdealizedState, Tendon
 from .mesh import Embedding
 from .model import Model
-from .optimizer import RunCallbacks, SoftIK, pose_errors, run_stage
+from .optimizer import ADJOINT_TOL, EVAL_TOL, PoseSolve, RunCallbacks, SoftIK, pose_errors, run_stage
 from .problem import Problem
 from .scene import OptimizeSettings
-from .solvers import NewtonSolver
+from .solvers import NewtonSolver, solve_many
 
 
 @dataclass
@@ -120,3 +125,43 @@ def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedSt
     f = st.figures
     return RealizableResult(st.ac, st.r, st.tau, st.x, f.pose_error, f.pose_error_rel, f.pose_error_max,
                             st.iterations, st.evaluations, time.perf_counter() - t0)
+
+
+def predict_realizable(problem: Problem, tendons: list[Tendon], settings: OptimizeSettings, ratios,
+                       positions, solver: str = "auto") -> tuple[float, np.ndarray]:
+    """One Gauss-Newton step of the realizable soft IK: the equilibrium at ``ratios``
+    (P, T) c / L0, warm started from ``positions`` (P, n, 2) m (those of a nearby
+    layout), its target Jacobian (:func:`target_jacobian`), and the bounded linear
+    least-squares step of the pose + contraction objective. Returns the predicted
+    pose error (fraction of L, over every pose) and the ratios (P, T) it predicts
+    them at. Raises ConvergenceError when an equilibrium cannot be solved."""
+    cables = tendon_cables(problem, tendons)
+    ik = SoftIK(problem, settings, solver, cables=cables)
+    ratios = ik.split(ratios)
+    fs, L = problem.scene.fibers, problem.size
+    w = np.sqrt(settings.contraction_reg)
+    err2, out = 0.0, np.empty_like(ratios)
+    for i, ps in enumerate(ik.poses):
+        r = ratios[i]
+        ps.model.set_positions(positions[i])
+        eq = ps.solve(r * cables.a0, EVAL_TOL)
+        res = ((ps.problem.target_positions(eq.x) - ps.problem.target_goal) / L).ravel()
+        A = target_jacobian(ps, cables.a0).reshape(len(res), -1) / L
+        step = lsq_linear(np.vstack([A, w * np.eye(len(r))]), -np.concatenate([res, w * r]),
+                          bounds=(-fs.max_payout - r, fs.max_contraction - r), method="bvls").x
+        err2 += float(np.sum((res + A @ step) ** 2))
+        out[i] = np.clip(r + step, -fs.max_payout, fs.max_contraction)
+    return float(np.sqrt(err2)), out
+
+
+def target_jacobian(ps: PoseSolve, a0: np.ndarray) -> np.ndarray:
+    """d(target positions)/d(c / L0) at the pose's last equilibrium, (t, 2, T) m:
+    per cable j the sensitivity dx*/dr_j = -H^-1 (d2E/dx dac) a0_j e_j, read at the
+    targets (their positions are linear in x)."""
+    def rhs():
+        for j in range(len(a0)):
+            b = ps.model.mixed_product(a0[j] * np.eye(1, len(a0), j).ravel())
+            b[ps.problem.fixed] = 0.0
+            yield b
+
+    return np.stack([-ps.problem.target_positions(dx) for dx in solve_many(ps.linear, rhs(), ADJOINT_TOL)], axis=-1)

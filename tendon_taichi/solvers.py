@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Iterable, Iterator, Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -396,6 +396,17 @@ def make_linear_solver(name: str, model: Model) -> LinearSolver:
     if name == "direct":
         return DirectSolver(model)
     raise InputError(f"unknown solver '{name}' (choose from {', '.join(SOLVERS)})")
+
+
+def solve_many(linear: LinearSolver, rhs: Iterable[np.ndarray], tol: float) -> Iterator[np.ndarray]:
+    """y (n, 2) with H y = b for each b (n, 2) of ``rhs``, H the Hessian at the model's
+    current state: the first solve prepares it (direct: factorizes it), the others
+    reuse that (direct: one triangular solve each)."""
+    for j, b in enumerate(rhs):
+        if j and isinstance(linear, DirectSolver):
+            yield linear.approx_solve(b)
+        else:
+            yield linear.solve(b, tol=tol, prepare=(j == 0))
 
 
 class NewtonSolver:

@@ -1,14 +1,18 @@
 """Tendon consolidation: a split tendon is joined back, a useless tendon is
 dropped, needed tendons are kept, the tolerance bounds the pose lost, the
 budget buys fewer tendons within it, and refinement grows a cut tendon back -
-also to take over from a tendon it lets drop."""
+also to take over from a tendon it lets drop - with the same steps whether its
+candidates are screened by a Gauss-Newton step or all solved in full; the
+screen's target Jacobian matches finite differences and its step reaches a
+reachable pose."""
 
 import numpy as np
 import pytest
 
-from tendon_taichi.consolidation import Bridges, ConsolidationSettings, consolidate
+from tendon_taichi.consolidation import SCREEN, Bridges, ConsolidationSettings, consolidate
 from tendon_taichi.extraction import FiberView, IdealizedState
-from tendon_taichi.realizable import solve_realizable_poses
+from tendon_taichi.optimizer import SoftIK
+from tendon_taichi.realizable import predict_realizable, solve_realizable_poses, target_jacobian, tendon_cables
 
 
 def _state(p, eq, paths):
@@ -33,9 +37,9 @@ def _spacings(p, n):
     return n * p.fibers.spacing / p.size
 
 
-def _run(p, tendons, state, tol, budget=0.0, gap=3.0, refine=12):
+def _run(p, tendons, state, tol, budget=0.0, gap=3.0, refine=12, screen=SCREEN):
     real = solve_realizable_poses(p, tendons, state, p.scene.optimize, "direct")
-    settings = ConsolidationSettings(tol, _spacings(p, gap), budget, refine)
+    settings = ConsolidationSettings(tol, _spacings(p, gap), budget, refine, screen)
     return consolidate(p, tendons, state, p.scene.optimize, real, settings, "direct")
 
 
@@ -135,14 +139,16 @@ def test_a_candidate_that_cannot_be_solved_is_skipped(planted, monkeypatch):
     assert out.unsolved >= 3 and out.as_json()["unsolved"] == out.unsolved
 
 
-def test_refinement_grows_a_cut_tendon_back_to_the_planted_one(planted):
+@pytest.mark.parametrize("screen", [SCREEN, 0], ids=["screened", "all"])
+def test_refinement_grows_a_cut_tendon_back_to_the_planted_one(planted, screen):
     """The straight planted tendon with its last two fibers cut off: no drop fits
     (tolerance 0), and refinement extends it back, fiber by fiber, to the planted
     layout, which is exact; with ``refine`` 0 nothing changes."""
     p, paths, eq = planted
     st = _state(p, eq, paths)
     tendons = _tendons(p, [paths[0], paths[1][:-2]], st)
-    out = _run(p, tendons, st, tol=0.0)
+    out = _run(p, tendons, st, tol=0.0, screen=screen)
+    assert (out.screened > out.evaluations) == bool(screen)
     assert [s.action for s in out.steps] == ["extend", "extend"]
     errors = [out.extracted_pose_error_rel] + [s.realizable_pose_error_rel for s in out.steps]
     assert all(b < 0.98 * a for a, b in zip(errors, errors[1:]))  # each step gained REFINE_GAIN at least
@@ -152,16 +158,66 @@ def test_refinement_grows_a_cut_tendon_back_to_the_planted_one(planted):
     assert off.steps == [] and off.tendons == tendons
 
 
-def test_refinement_lets_a_tendon_drop_that_a_neighbour_takes_over(planted):
+@pytest.mark.parametrize("screen", [SCREEN, 0], ids=["screened", "all"])
+def test_refinement_lets_a_tendon_drop_that_a_neighbour_takes_over(planted, screen):
     """The straight planted tendon cut in two, the short piece (one fiber) out of
     join reach: dropping it alone loses pose (more than tolerance 0 allows), but
     with the long piece grown into its place the drop is kept - the planted layout."""
     p, paths, eq = planted
     st = _state(p, eq, paths)
     tendons = _tendons(p, [paths[0], paths[1][:-2], paths[1][-1:]], st)
-    out = _run(p, tendons, st, tol=0.0, gap=0.5)
+    out = _run(p, tendons, st, tol=0.0, gap=0.5, screen=screen)
     assert [s.action for s in out.steps] == ["drop", "extend", "extend"]
     assert out.steps[0].tendons == (2,)
     assert out.steps[0].realizable_pose_error_rel > out.extracted_pose_error_rel  # outside the bound alone
     assert {frozenset(t.fibers) for t in out.tendons} == {frozenset(q) for q in paths}
     assert out.realizable.pose_error_rel <= 1e-4 < out.extracted_pose_error_rel
+
+
+def _planted_tendons(p, paths):
+    ones = IdealizedState(np.ones(p.fibers.n_fibers), np.zeros(p.fibers.n_fibers), p.mesh.nodes, 0.01)
+    return _tendons(p, paths, ones)
+
+
+def test_target_jacobian_matches_finite_differences(planted):
+    """d(target positions)/d(c / L0) of the realizable robot against central
+    differences of tightly solved equilibria, per tendon."""
+    p, paths, _ = planted
+    cables = tendon_cables(p, _planted_tendons(p, paths))
+    ps = SoftIK(p, p.scene.optimize, "direct", cables=cables).poses[0]
+    r, h = np.array([0.05, 0.07]), 1e-6
+
+    def targets(ratios):
+        return p.target_positions(ps.newton.solve(ac=ratios * cables.a0, x0=p.mesh.nodes, tol=1e-13).x)
+
+    targets(r)
+    J = target_jacobian(ps, cables.a0)
+    for j in range(2):
+        e = h * np.eye(2)[j]
+        fd = (targets(r + e) - targets(r - e)) / (2 * h)
+        assert np.linalg.norm(J[..., j] - fd) <= 1e-6 * np.linalg.norm(fd)
+        assert np.linalg.norm(fd) > 1e-3 * p.size
+
+
+def test_gauss_newton_steps_converge_to_a_reachable_pose(planted):
+    """From 5 % contraction, Gauss-Newton steps of the realizable IK converge to the
+    planted 8 % (the goals are reachable): the first cuts the pose error tenfold,
+    the second a hundredfold more, and each predicts the error it leaves (as the
+    equilibrium at its ratios has it) to within 5 % of the error it started from."""
+    p, paths, _ = planted
+    tendons = _planted_tendons(p, paths)
+    a0 = tendon_cables(p, tendons).a0
+    ps = SoftIK(p, p.scene.optimize, "direct", cables=tendon_cables(p, tendons)).poses[0]
+
+    def at(ratios):
+        x = ps.newton.solve(ac=ratios[0] * a0, x0=p.mesh.nodes, tol=1e-12).x
+        return x, np.linalg.norm(p.target_positions(x) - p.target_goal) / p.size
+
+    ratios = np.full((1, 2), 0.05)
+    x, error = at(ratios)
+    for gain in (10.0, 100.0):
+        predicted, ratios = predict_realizable(p, tendons, p.scene.optimize, ratios, [x], "direct")
+        x, now = at(ratios)
+        assert now <= error / gain and abs(predicted - now) <= 0.05 * error, (gain, error, now, predicted)
+        error = now
+    assert np.abs(ratios - 0.08).max() <= 1e-4

@@ -135,6 +135,9 @@ def test_extract_bad_input(run_rrd, cli, tmp_path):
     _one_line(cli("compare", run_rrd, "--consolidate-tol", "-0.1", "--no-record"), "--consolidate-tol")
     _one_line(cli("compare", run_rrd, "--join-gap", "nan", "--no-record"), "--join-gap")
     _one_line(cli("compare", run_rrd, "--consolidate-budget", "-inf", "--no-record"), "--consolidate-budget")
+    _one_line(cli("compare", run_rrd, "--refine", "-1", "--no-record"), "--refine must be an integer >= 0")
+    _one_line(cli("extract", run_rrd, "--extractor", "strands", "--screen", "-2", "--no-record"),
+              "--screen must be an integer >= 0")
     _one_line(cli("extract", tmp_path / "none.rrd", "--extractor", "strands"), "does not exist")
     from tendon_taichi import build_problem, load_scene
     from tendon_taichi.recording import Recorder

@@ -1,10 +1,10 @@
 """Re-extract a finished planted-bench run with this code's consolidation.
 
-Usage: python benchmarks/planted/reextract.py RUN.json OUT.json [--refine N] [--cases NAME ...]
+Usage: python benchmarks/planted/reextract.py RUN.json OUT.json [--refine N] [--screen N] [--cases NAME ...]
 
 RUN.json is the planted_bench.json of `tendon-taichi planted-bench`; its cases'
 recordings are extracted again (every extractor, consolidation with the run's
-bounds and ``--refine N`` refinement steps), without optimizing again, and
+bounds, ``--refine N`` refinement steps and ``--screen N``), without optimizing again, and
 scored by the bench's own rules (best extractor, pass). OUT.json has the same
 shape (``cases``, ``totals``; ``time_s`` is the extraction time), so
 counts_by_level.py reads it. Progress goes to stderr.
@@ -15,7 +15,7 @@ import json
 import sys
 import time
 
-from tendon_taichi.consolidation import REFINE, ConsolidationSettings
+from tendon_taichi.consolidation import REFINE, SCREEN, ConsolidationSettings
 from tendon_taichi.planted_bench import score_extraction, totals
 from tendon_taichi.tendons import extract
 
@@ -33,10 +33,12 @@ def main(argv=None):
     ap.add_argument("run")
     ap.add_argument("out")
     ap.add_argument("--refine", type=int, default=REFINE)
+    ap.add_argument("--screen", type=int, default=SCREEN)
     ap.add_argument("--cases", nargs="*")
     args = ap.parse_args(argv)
     src = json.load(open(args.run))
-    consolidation = ConsolidationSettings(**{**src.get("consolidation", {}), "refine": args.refine})
+    chosen = {"refine": args.refine, "screen": args.screen}
+    consolidation = ConsolidationSettings(**{**src.get("consolidation", {}), **chosen})
     cases = []
     for c in src["cases"]:
         if "error" in c or (args.cases and c["case"] not in args.cases):
@@ -46,7 +48,7 @@ def main(argv=None):
         print(f"{n['case']}: {n['count']}/{n['planted_count']} tendons ({n['best']}), realizable "
               f"{100 * n['realizable_pose_error_rel']:.2f}%, {'pass' if n['passed'] else 'miss'}, "
               f"{n['time_s']:.0f} s", file=sys.stderr, flush=True)
-        out = {**src, "consolidation": {**src.get("consolidation", {}), "refine": args.refine},
+        out = {**src, "consolidation": {**src.get("consolidation", {}), **chosen},
                "cases": cases, "totals": totals(cases)}
         with open(args.out, "w") as f:
             json.dump(out, f, indent=1)
