@@ -36,11 +36,11 @@ contractions, only the ``screen`` best predicted, and of those only the ones
 predicted to make the gain a step needs (within ``SCREEN_MARGIN``). When the
 best reduction is outside the bound, it is refined, and kept if that brings it
 within. When no reduction fits, the layout left is refined, and if that
-helped the reductions are tried again. Why: an
-extractor follows the idealized tensions, which the realizable robot - one
-tension per tendon - cannot reproduce exactly, and a dropped tendon's work can
-often be taken over by a neighbour grown a little longer. Both bounds and the
-reach are fractions of the body size, so they mean the same at every resolution.
+helped the reductions are tried again. Why: an extractor follows the idealized
+tensions, which the realizable robot - one tension per tendon - cannot
+reproduce exactly, and a dropped tendon's work can often be taken over by a
+neighbour grown a little longer. Both bounds and the reach are fractions of the
+body size, so they mean the same at every resolution.
 """
 
 from __future__ import annotations
@@ -255,16 +255,18 @@ class _Search:
         within ``SCREEN_MARGIN`` of ``need``."""
         problem, _, settings, solver = self.args
         positions = [real.x] if real.poses is None else [p.x for p in real.poses]
-        scored = []
+        scored = []  # (predicted error, predicted ratios, candidate)
         for c in candidates:
             self.out.screened += 1
             try:
-                scored.append((*predict_realizable(problem, c[2], settings, real.ratios, positions, solver), c))
+                error, ratios = predict_realizable(problem, c[2], settings, real.ratios, positions, solver)
             except ConvergenceError:
                 self.out.unsolved += 1
+                continue
+            scored.append((error, ratios, c))
         scored.sort(key=lambda s: s[0])
-        kept = [s for s in scored[:self.screen] if s[0] <= (1.0 + SCREEN_MARGIN) * need]
-        return [s[2] for s in kept], [s[1] for s in kept]
+        kept = [(c, ratios) for error, ratios, c in scored[:self.screen] if error <= (1.0 + SCREEN_MARGIN) * need]
+        return [c for c, _ in kept], [ratios for _, ratios in kept]
 
 
 def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings: OptimizeSettings,

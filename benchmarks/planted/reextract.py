@@ -37,8 +37,8 @@ def main(argv=None):
     ap.add_argument("--cases", nargs="*")
     args = ap.parse_args(argv)
     src = json.load(open(args.run))
-    chosen = {"refine": args.refine, "screen": args.screen}
-    consolidation = ConsolidationSettings(**{**src.get("consolidation", {}), **chosen})
+    chosen = {**src.get("consolidation", {}), "refine": args.refine, "screen": args.screen}
+    consolidation = ConsolidationSettings(**chosen)
     cases = []
     for c in src["cases"]:
         if "error" in c or (args.cases and c["case"] not in args.cases):
@@ -48,7 +48,7 @@ def main(argv=None):
         print(f"{n['case']}: {n['count']}/{n['planted_count']} tendons ({n['best']}), realizable "
               f"{100 * n['realizable_pose_error_rel']:.2f}%, {'pass' if n['passed'] else 'miss'}, "
               f"{n['time_s']:.0f} s", file=sys.stderr, flush=True)
-        out = {**src, "consolidation": {**src.get("consolidation", {}), **chosen},
+        out = {**src, "consolidation": chosen,
                "cases": cases, "totals": totals(cases)}
         with open(args.out, "w") as f:
             json.dump(out, f, indent=1)
