@@ -1,10 +1,10 @@
 """Tendon consolidation: a split tendon is joined back, a useless tendon is
 dropped, needed tendons are kept, the tolerance bounds the pose lost, the
 budget buys fewer tendons within it, and refinement grows a cut tendon back -
-also to take over from a tendon it lets drop - with the same steps whether its
-candidates are screened by a Gauss-Newton step or all solved in full; the
-screen's target Jacobian matches finite differences and its step reaches a
-reachable pose."""
+also to take over from a tendon it lets drop, and to finish a join that looked
+worse than the best drop - with the same steps whether its candidates are
+screened by a Gauss-Newton step or all solved in full; the screen's target
+Jacobian matches finite differences and its step reaches a reachable pose."""
 
 import numpy as np
 import pytest
@@ -170,6 +170,24 @@ def test_refinement_lets_a_tendon_drop_that_a_neighbour_takes_over(planted, scre
     assert [s.action for s in out.steps] == ["drop", "extend", "extend"]
     assert out.steps[0].tendons == (2,)
     assert out.steps[0].realizable_pose_error_rel > out.extracted_pose_error_rel  # outside the bound alone
+    assert {frozenset(t.fibers) for t in out.tendons} == {frozenset(q) for q in paths}
+    assert out.realizable.pose_error_rel <= 1e-4 < out.extracted_pose_error_rel
+
+
+def test_a_worse_join_is_refined_when_the_best_drop_cannot_be(planted):
+    """The L-shaped planted tendon cut in two, its last two fibers also cut off:
+    dropping the short piece loses less pose than joining the pieces (1.3 % of L
+    against 2.0 %), and neither fits the bound (tolerance 0). Refining only the
+    best drop ends with the long piece grown to 0.2 % of L, not the planted
+    layout; refining the best join too grows it back to the planted tendon,
+    which is exact."""
+    p, paths, eq = planted
+    st = _state(p, eq, paths)
+    f = list(paths[0])
+    tendons = _tendons(p, [paths[1], f[:3], f[6:-2]], st)
+    out = _run(p, tendons, st, tol=0.0, gap=4.0)
+    assert [s.action for s in out.steps] == ["join", "extend", "extend"]
+    assert out.steps[0].tendons == (1, 2)
     assert {frozenset(t.fibers) for t in out.tendons} == {frozenset(q) for q in paths}
     assert out.realizable.pose_error_rel <= 1e-4 < out.extracted_pose_error_rel
 
