@@ -34,16 +34,13 @@ Gauss-Newton step each from the current layout's solution
 instead of an L-BFGS-B run), then solves in full, from the predicted
 contractions, only the ``screen`` best predicted, and of those only the ones
 predicted to make the gain a step needs (within ``SCREEN_MARGIN``). When the
-best reduction is outside the bound, the best drop and the best join are each
-refined, and the one refined to the lower error is kept if that is within.
-When no reduction fits, the layout left is refined, and if that helped the
-reductions are tried again. Why: an extractor follows the idealized tensions,
-which the realizable robot - one tension per tendon - cannot reproduce
-exactly; a dropped tendon's work can often be taken over by a neighbour grown
-a little longer, and two pieces of one strand, joined, often lose pose until
-the joined tendon's ends are grown back (a drop may look better before either
-is refined). Both bounds and the reach are fractions of the body size, so they
-mean the same at every resolution.
+best reduction is outside the bound, it is refined, and kept if that brings it
+within. When no reduction fits, the layout left is refined, and if that
+helped the reductions are tried again. Why: an extractor follows the idealized
+tensions, which the realizable robot - one tension per tendon - cannot
+reproduce exactly, and a dropped tendon's work can often be taken over by a
+neighbour grown a little longer. Both bounds and the reach are fractions of the
+body size, so they mean the same at every resolution.
 """
 
 from __future__ import annotations
@@ -233,13 +230,6 @@ class _Search:
                 best = Candidate(action, ids, tendons, r)
         return best
 
-    def best_each(self, candidates) -> list[Candidate]:
-        """The best candidate of each action (in order of first appearance)."""
-        groups: dict[str, list] = {}
-        for c in candidates:
-            groups.setdefault(c[0], []).append(c)
-        return [b for b in (self.best(g) for g in groups.values()) if b is not None]
-
     def refine(self, tendons: list[Tendon], real: RealizableResult) -> list[Candidate]:
         """Trims and extensions of ``tendons`` (solved as ``real``), the best each
         round, while each lowers the pose error enough (module docstring)."""
@@ -292,29 +282,17 @@ def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, 
     bound = max(base + options.tolerance, options.budget)
     while True:
         while out.tendons:
-            chain = _reduce(search, out.tendons, bound)
-            if chain is None:
+            c = search.best(_reductions(out.tendons, search.bridges))
+            if c is None:
+                break
+            chain = [c] + (search.refine(c.tendons, c.realizable) if c.error > bound else [])
+            if chain[-1].error > bound:
                 break
             _accept(out, chain)
         polish = search.refine(out.tendons, out.realizable)
         _accept(out, polish)
         if not polish:
             return out
-
-
-def _reduce(search: _Search, tendons: list[Tendon], bound: float) -> list[Candidate] | None:
-    """The best reduction of ``tendons`` within ``bound`` (module docstring): the best
-    candidate if it fits, else the best refined chain from the best drop and the best
-    join; None when neither fits."""
-    bests = search.best_each(_reductions(tendons, search.bridges))
-    if not bests:
-        return None
-    c = min(bests, key=lambda b: b.error)
-    if c.error <= bound:
-        return [c]
-    chains = [[b] + search.refine(b.tendons, b.realizable) for b in bests]
-    chain = min(chains, key=lambda ch: ch[-1].error)
-    return chain if chain[-1].error <= bound else None
 
 
 def _accept(out: Consolidation, chain: list[Candidate]) -> None:

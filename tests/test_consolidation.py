@@ -1,10 +1,11 @@
 """Tendon consolidation: a split tendon is joined back, a useless tendon is
 dropped, needed tendons are kept, the tolerance bounds the pose lost, the
 budget buys fewer tendons within it, and refinement grows a cut tendon back -
-also to take over from a tendon it lets drop, and to finish a join that looked
-worse than the best drop - with the same steps whether its candidates are
-screened by a Gauss-Newton step or all solved in full; the screen's target
-Jacobian matches finite differences and its step reaches a reachable pose."""
+also to take over from a tendon it lets drop - with the same steps whether its
+candidates are screened by a Gauss-Newton step or all solved in full (a join
+that looks worse than the best drop is not refined: a known weakness, xfail);
+the screen's target Jacobian matches finite differences and its step reaches a
+reachable pose."""
 
 import numpy as np
 import pytest
@@ -174,13 +175,16 @@ def test_refinement_lets_a_tendon_drop_that_a_neighbour_takes_over(planted, scre
     assert out.realizable.pose_error_rel <= 1e-4 < out.extracted_pose_error_rel
 
 
+@pytest.mark.xfail(strict=True, reason="known weakness (issue 6): only the reduction with the lowest unrefined "
+                   "error is refined; refining the best join too fixes this case but made extraction 1.2-1.6x "
+                   "slower for 1 more count-stable planted case (count_stability_probes.md, probe 6)")
 def test_a_worse_join_is_refined_when_the_best_drop_cannot_be(planted):
     """The L-shaped planted tendon cut in two, its last two fibers also cut off:
     dropping the short piece loses less pose than joining the pieces (1.3 % of L
     against 2.0 %), and neither fits the bound (tolerance 0). Refining only the
     best drop ends with the long piece grown to 0.2 % of L, not the planted
-    layout; refining the best join too grows it back to the planted tendon,
-    which is exact."""
+    layout; refining the best join too would grow it back to the planted
+    tendon, which is exact."""
     p, paths, eq = planted
     st = _state(p, eq, paths)
     f = list(paths[0])

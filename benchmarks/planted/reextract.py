@@ -1,22 +1,28 @@
 """Re-extract a finished planted-bench run with this code's consolidation.
 
 Usage: python benchmarks/planted/reextract.py RUN.json OUT.json [--refine N] [--screen N] [--cases NAME ...]
+       [--bench-dir DIR]
 
 RUN.json is the planted_bench.json of `tendon-taichi planted-bench`; its cases'
 recordings are extracted again (every extractor, consolidation with the run's
 bounds, ``--refine N`` refinement steps and ``--screen N``), without optimizing again, and
 scored by the bench's own rules (best extractor, pass). OUT.json has the same
 shape (``cases``, ``totals``; ``time_s`` is the extraction time), so
-counts_by_level.py reads it. Progress goes to stderr.
+counts_by_level.py reads it. ``--bench-dir DIR`` also writes the result as a
+planted-bench run (planted_bench.json, .csv, gallery.png), each case's
+``time_s`` its recorded optimize time plus the new extraction time (``extract_s``):
+what `tendon-taichi planted-bench` would give with this code, as the
+optimizer's output does not change. Progress goes to stderr.
 """
 
 import argparse
 import json
 import sys
 import time
+from pathlib import Path
 
 from tendon_taichi.consolidation import REFINE, SCREEN, ConsolidationSettings
-from tendon_taichi.planted_bench import score_extraction, totals
+from tendon_taichi.planted_bench import load_suite, score_extraction, totals, write_outputs
 from tendon_taichi.tendons import extract
 
 
@@ -35,6 +41,7 @@ def main(argv=None):
     ap.add_argument("--refine", type=int, default=REFINE)
     ap.add_argument("--screen", type=int, default=SCREEN)
     ap.add_argument("--cases", nargs="*")
+    ap.add_argument("--bench-dir", type=Path)
     args = ap.parse_args(argv)
     src = json.load(open(args.run))
     chosen = {**src.get("consolidation", {}), "refine": args.refine, "screen": args.screen}
@@ -52,6 +59,16 @@ def main(argv=None):
                "cases": cases, "totals": totals(cases)}
         with open(args.out, "w") as f:
             json.dump(out, f, indent=1)
+    if args.bench_dir:
+        write_bench(out, args.bench_dir, Path(src["suite"]))
+
+
+def write_bench(result: dict, out_dir: Path, suite: Path) -> None:
+    """``result`` written out as a planted-bench run in ``out_dir`` (module docstring)."""
+    cases = [{**c, "extract_s": c["time_s"], "time_s": c.get("optimize_s", 0.0) + c["time_s"]}
+             for c in result["cases"]]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_outputs({**result, "cases": cases, "totals": totals(cases)}, out_dir, load_suite(suite))
 
 
 if __name__ == "__main__":
