@@ -59,7 +59,7 @@ def main(argv=None):
                "cases": cases, "totals": totals(cases)}
         with open(args.out, "w") as f:
             json.dump(out, f, indent=1)
-    if args.bench_dir:
+    if args.bench_dir and cases:
         write_bench(out, args.bench_dir, Path(src["suite"]))
 
 
