@@ -159,8 +159,9 @@ OPTIMIZE_FLAGS = {
     "--active-threshold": ("active_threshold", float, "active if tau > this x tau_ref"),
     "--sparsity-measure": ("sparsity_measure", str, "length (default) or count"),
     "--continuity-measure": ("continuity_measure", str, "length (default) or count"),
-    "--strand-end-measure": ("strand_end_measure", str, "tension (squared imbalance, default) or count "
-                                                        "(smooth L0: each end costs w_end)"),
+    "--strand-end-measure": ("strand_end_measure", str, "tension (squared imbalance, default), count "
+                                                        "(smooth L0: each end costs w_end) or linear "
+                                                        "(the imbalance's magnitude)"),
     "--stage-iterations": ("stage_iterations", int, "L-BFGS-B iteration cap per stage"),
     "--settle-tol": ("settle_tol", float, "a stage ends when the objective fell by less than this x its "
                                           "start value over the settle window"),

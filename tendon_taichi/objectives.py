@@ -22,7 +22,12 @@ through one adjoint solve.
   ``"count"`` measure it is a smooth L0 of the same imbalance,
   ``O_end = w_end sum_v s_(k^2)(E_v)``, ``E_v = (T1 - T2)^2 + (T3 + T4 + ...)^2``:
   every end at least ``k`` (the sparsity's homotopy parameter) out of balance
-  costs ``w_end`` whatever its tension - a count of strand ends;
+  costs ``w_end`` whatever its tension - a count of strand ends. With the
+  ``"linear"`` measure it is the imbalance's magnitude,
+  ``O_end = w_end sum_v (sqrt(E_v + eps^2) - eps) / tau_ref``, ``eps = END_EPS tau_ref``
+  (smooth where a strand is balanced): an end costs in proportion to its tension,
+  so splitting a strand into two parallel ones at half the tension saves nothing
+  on its ends (with the squared imbalance it halves their cost);
 * ``effort``: ``O_eff = w_eff sum_i (a0_i / L) tau_i / tau_ref``, the actuation
   effort (tension times length): antagonist fibers pulling against each other
   (co-contraction) cost, so fibers that need not pull are paid out.
@@ -176,9 +181,15 @@ class EffortTerm:
         return TermValue(float(np.dot(self.c, state.tau)), dtau=self.c.copy())
 
 
+#: the "linear" strand-end measure's smoothing, x tau_ref
+END_EPS = 0.01
+
+
 class StrandEndTerm:
-    """O_end = weight sum_v E_v / tau_ref^2 (``measure`` "tension") or weight sum_v
-    s_(k^2)(E_v) (``measure`` "count"; ``k`` in N, set per homotopy stage) with
+    """O_end = weight sum_v E_v / tau_ref^2 (``measure`` "tension"), weight sum_v
+    s_(k^2)(E_v) (``measure`` "count"; ``k`` in N, set per homotopy stage) or
+    weight sum_v (sqrt(E_v + eps^2) - eps) / tau_ref (``measure`` "linear",
+    ``eps = END_EPS tau_ref``) with
     ``E_v = (T1 - T2)^2 + (T3 + ...)^2`` (N^2) over the fiber nodes away from the
     clamped band (a node whose triangle has a clamped corner does not count:
     tendons may end at the base, where motors sit)."""
@@ -188,8 +199,9 @@ class StrandEndTerm:
     def __init__(self, problem: Problem, weight: float, tension_scale: float, measure: str = "tension",
                  k: float = 1.0):
         fib = problem.fibers
-        self.count, self.k = measure == "count", k
-        self.weight = weight if self.count else weight / tension_scale ** 2
+        self.measure, self.k = measure, k
+        self.weight = {"count": weight, "linear": weight / tension_scale}.get(measure, weight / tension_scale ** 2)
+        self.eps = END_EPS * tension_scale
         self.n_fibers = fib.n_fibers
         free = ~problem.fixed[problem.mesh.triangles[fib.embedding.tri]].any(axis=1)  # (k,)
         start, ids = fib.incidence
@@ -213,9 +225,12 @@ class StrandEndTerm:
         g = np.empty_like(Ts)  # dE/dTs
         g[:, 0], g[:, 1] = 2.0 * jump, -2.0 * jump
         g[:, 2:] = 2.0 * rest[:, None]
-        if self.count:
+        if self.measure == "count":
             s, ds = smoothstep(E, self.k * self.k)
             value, g = float(s.sum()), g * ds[:, None]
+        elif self.measure == "linear":
+            r = np.sqrt(E + self.eps * self.eps)
+            value, g = float((r - self.eps).sum()), g * (0.5 / r)[:, None]
         else:
             value = float(E.sum())
         fib_sorted = np.take_along_axis(self.incident, order, axis=1)

@@ -134,7 +134,8 @@ class OptimizeSettings:
     (x tau_ref); ``sparsity_measure`` and ``continuity_measure`` are
     ``"length"`` (resolution independent, default) or ``"count"`` (the
     paper's literal sums); ``strand_end_measure`` is ``"tension"`` (the
-    squared imbalance, default) or ``"count"`` (a smooth L0 count of ends).
+    squared imbalance, default), ``"count"`` (a smooth L0 count of ends) or
+    ``"linear"`` (the imbalance's magnitude: an end costs its tension).
     A stage has settled - and ends - when over the last ``settle_window``
     L-BFGS-B iterations the objective fell by less than
     ``settle_tol`` times its value at the stage's start (and, from stage 1 on,
@@ -361,7 +362,7 @@ def _read_optimize(r: _Reader, fibers: FiberSettings) -> OptimizeSettings:
         active_threshold=r.number("active_threshold", d.active_threshold, gt=0.0),
         sparsity_measure=r.choice("sparsity_measure", d.sparsity_measure, measures),
         continuity_measure=r.choice("continuity_measure", d.continuity_measure, measures),
-        strand_end_measure=r.choice("strand_end_measure", d.strand_end_measure, ("tension", "count")),
+        strand_end_measure=r.choice("strand_end_measure", d.strand_end_measure, ("tension", "count", "linear")),
         stage_iterations=r.integer("stage_iterations", d.stage_iterations, ge=1),
         settle_tol=r.number("settle_tol", d.settle_tol, ge=0.0),
         settle_window=r.integer("settle_window", d.settle_window, ge=1),

@@ -111,6 +111,35 @@ def test_adjoint_gradient_of_the_strand_end_count(t_shape_1, solver):
     assert 0 < f < 1e-4 * len(p.fibers.nodes)  # at most w_end per counted node
 
 
+def test_strand_end_linear_measure_charges_ends_by_their_tension(t_shape_1):
+    """The magnitude form: an end costs its tension (smoothed by eps), so an end at
+    twice the tension costs twice as much, not four times; a jump costs its size."""
+    p = t_shape_1
+    term = StrandEndTerm(p, 2.0, 0.5, "linear")  # weight / tau_ref = 4, eps = 0.005 N
+    eps = 0.01 * 0.5
+
+    def mag(t):
+        return np.sqrt(t * t + eps * eps) - eps
+
+    fib = p.fibers
+    strand = _arm_strand(p)
+    x = p.mesh.nodes
+    tau = np.zeros(fib.n_fibers)
+    for t in (0.3, 0.6):
+        tau[strand] = t
+        assert term.evaluate(State(x, tau, tau)).value == pytest.approx(4 * 2 * mag(t))
+    tau[strand] = 0.3
+    tau[strand[2]] = 0.5  # a jump of 0.2 at two inner nodes
+    assert term.evaluate(State(x, tau, tau)).value == pytest.approx(4 * (2 * mag(0.3) + 2 * mag(0.2)))
+    rng = np.random.default_rng(3)
+    _check_tension_gradient(term, x, rng.uniform(0, 1, fib.n_fibers) * (rng.uniform(size=fib.n_fibers) < 0.3), rng)
+
+
+@pytest.mark.parametrize("solver", ["cg", "direct"])
+def test_adjoint_gradient_of_the_strand_end_linear_measure(t_shape_1, solver):
+    _check_adjoint_gradient(t_shape_1, dict(strand_end=1e-4, strand_end_measure="linear"), solver, ["strand_end"])
+
+
 def test_smoothstep():
     t = np.array([-1.0, 0.0, 0.25, 0.5, 1.0, 2.0])
     s, ds = smoothstep(t, 1.0)
