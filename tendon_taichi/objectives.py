@@ -200,7 +200,7 @@ class StrandEndTerm:
                  k: float = 1.0):
         fib = problem.fibers
         self.measure, self.k = measure, k
-        self.weight = {"count": weight, "linear": weight / tension_scale}.get(measure, weight / tension_scale ** 2)
+        self.weight = weight / tension_scale ** {"tension": 2, "linear": 1, "count": 0}[measure]  # O_end's units
         self.eps = END_EPS * tension_scale
         self.n_fibers = fib.n_fibers
         free = ~problem.fixed[problem.mesh.triangles[fib.embedding.tri]].any(axis=1)  # (k,)
