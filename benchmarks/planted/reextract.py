@@ -1,11 +1,12 @@
 """Re-extract a finished planted-bench run with this code's consolidation.
 
-Usage: python benchmarks/planted/reextract.py RUN.json OUT.json [--refine N] [--screen N] [--cases NAME ...]
-       [--bench-dir DIR]
+Usage: python benchmarks/planted/reextract.py RUN.json OUT.json [--refine N] [--screen N] [--budget F]
+       [--cases NAME ...] [--bench-dir DIR]
 
 RUN.json is the planted_bench.json of `tendon-taichi planted-bench`; its cases'
 recordings are extracted again (every extractor, consolidation with the run's
-bounds, ``--refine N`` refinement steps and ``--screen N``), without optimizing again, and
+bounds, or ``--budget F`` as its pose budget, ``--refine N`` refinement steps and ``--screen N``),
+without optimizing again, and
 scored by the bench's own rules (best extractor, pass). OUT.json has the same
 shape (``cases``, ``totals``; ``time_s`` is the extraction time), so
 counts_by_level.py reads it. ``--bench-dir DIR`` also writes the result as a
@@ -40,11 +41,14 @@ def main(argv=None):
     ap.add_argument("out")
     ap.add_argument("--refine", type=int, default=REFINE)
     ap.add_argument("--screen", type=int, default=SCREEN)
+    ap.add_argument("--budget", type=float, help="consolidation's pose budget (fraction of L; default: the run's)")
     ap.add_argument("--cases", nargs="*")
     ap.add_argument("--bench-dir", type=Path)
     args = ap.parse_args(argv)
     src = json.load(open(args.run))
     chosen = {**src.get("consolidation", {}), "refine": args.refine, "screen": args.screen}
+    if args.budget is not None:
+        chosen["budget"] = args.budget
     consolidation = ConsolidationSettings(**chosen)
     cases = []
     for c in src["cases"]:
