@@ -1,35 +1,40 @@
 """tendon-taichi: design the tendon layout of a 2D soft robot.
 
-The public API, one module per concept (DESIGN.md): :mod:`.scene` (scene
-files), :mod:`.mesh`, :mod:`.fibers`, :mod:`.cables`, :mod:`.problem`,
-:mod:`.model` (Taichi energies and derivatives), :mod:`.solvers` (Newton,
-PCG and direct backends), :mod:`.simulation`, :mod:`.objectives`,
-:mod:`.optimizer` (adjoint gradients, homotopy), :mod:`.recording` (rerun),
-:mod:`.runs` (optimize / resume / replay), :mod:`.plots`, :mod:`.export`.
-Taichi is initialised lazily (:mod:`.runtime`), never at import.
+The package is layered, one folder per layer, each importing only the layers
+below it (``docs/architecture.md``): :mod:`.objective` (the objective's terms
+and settings), :mod:`.body` (scene files, meshes, the fiber lattice, cables,
+problems), :mod:`.io` (recordings, exports, pictures, progress),
+:mod:`.physics` (the Taichi model), :mod:`.solve` (Newton and the linear
+backends), :mod:`.optimizer` (soft IK and the homotopy), :mod:`.extract`
+(the plugin protocol, metrics, the realizable robot, consolidation),
+:mod:`.tasks` (cases as Dask tasks), :mod:`.apps` (the commands' workflows),
+:mod:`.planted` (benchmarks with a known answer) and :mod:`.cli`.
+
+The names below are imported on first use (PEP 562): importing the package,
+or the plugin protocol :mod:`tendon_taichi.extraction`, does not start Taichi;
+Taichi is initialised lazily (:mod:`.physics.runtime`), never at import.
 """
 
-__version__ = "0.1.0"  # keep equal to pyproject.toml
+from ._lazy import lazy_exports
+from .version import __version__
 
-from .cables import CableSet
-from .errors import ConvergenceError, InputError, SceneError, TendonError
-from .export import write_export, write_vtu
-from .fibers import FiberGraph, FiberPairs, build_lattice
-from .mesh import Embedding, Mesh
-from .model import Model
-from .problem import Problem, build_problem
-from .scene import Scene, builtin_scenes, load_scene, parse_scene
-from .optimizer import SoftIK, StageResult
-from .recording import RecordingError, read_recording
-from .runs import RunResult, optimize, replay
-from .simulation import Simulation, simulate
-from .solvers import CGSolver, DirectSolver, Equilibrium, NewtonSolver
-
-__all__ = [
-    "CableSet", "ConvergenceError", "InputError", "SceneError", "TendonError", "write_export",
-    "write_vtu", "FiberGraph", "FiberPairs", "build_lattice", "Embedding", "Mesh", "Model",
-    "Problem", "build_problem", "Scene", "builtin_scenes", "load_scene", "parse_scene",
-    "Simulation", "simulate", "CGSolver", "DirectSolver", "Equilibrium", "NewtonSolver",
-    "SoftIK", "StageResult", "RecordingError", "read_recording", "RunResult", "optimize", "replay",
-    "__version__",
-]
+__getattr__, __dir__, _names = lazy_exports(__name__, {
+    ".errors": ("ConvergenceError", "InputError", "SceneError", "TendonError"),
+    ".body.cables": ("CableSet",),
+    ".body.fibers": ("FiberGraph", "FiberPairs", "build_lattice"),
+    ".body.mesh": ("Embedding", "Mesh"),
+    ".body.problem": ("Problem", "build_problem"),
+    ".body.scene": ("Scene", "builtin_scenes", "load_scene", "parse_scene"),
+    ".io.export": ("write_export", "write_vtu"),
+    ".io.recording": ("RecordingError", "read_recording"),
+    ".physics.model": ("Model",),
+    ".solve.cg": ("CGSolver",),
+    ".solve.direct": ("DirectSolver",),
+    ".solve.newton": ("Equilibrium", "NewtonSolver"),
+    ".optimizer.soft_ik": ("SoftIK",),
+    ".optimizer.homotopy": ("StageResult",),
+    ".apps.simulate": ("Simulation", "simulate"),
+    ".apps.optimize": ("RunResult", "optimize"),
+    ".apps.replay": ("replay",),
+}, modules={"sweep": ".apps.sweep"})
+__all__ = [*_names, "sweep", "__version__"]

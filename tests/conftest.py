@@ -90,7 +90,7 @@ def planted():
 
     from tendon_taichi import Model, NewtonSolver, build_problem, load_scene
     from tendon_taichi.extraction import FiberView, IdealizedState
-    from tendon_taichi.realizable import tendon_cables
+    from tendon_taichi.extract.realizable import tendon_cables
 
     base = build_problem(load_scene("t_shape"), 1)
     paths = [lattice_path(base, [np.array(q) for q in path]) for path in PLANTED]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from test_scene import BAD
 
-from tendon_taichi.export import EXPORT_KEYS
+from tendon_taichi.io.export import EXPORT_KEYS
 
 
 def test_console_script_is_installed():

@@ -10,10 +10,11 @@ reachable pose."""
 import numpy as np
 import pytest
 
-from tendon_taichi.consolidation import SCREEN, Bridges, ConsolidationSettings, consolidate
+from tendon_taichi.extract.consolidation import Bridges, consolidate
+from tendon_taichi.extract.settings import SCREEN, ConsolidationSettings
 from tendon_taichi.extraction import FiberView, IdealizedState
 from tendon_taichi.optimizer import SoftIK
-from tendon_taichi.realizable import predict_realizable, solve_realizable_poses, target_jacobian, tendon_cables
+from tendon_taichi.extract.realizable import predict_realizable, solve_realizable_poses, target_jacobian, tendon_cables
 
 
 def _state(p, eq, paths):
@@ -119,7 +120,7 @@ def test_budget_buys_fewer_tendons_within_it(planted):
 def test_a_candidate_that_cannot_be_solved_is_skipped(planted, monkeypatch):
     """The split-tendon case again, with every layout of fewer than three tendons but
     the planted one unsolvable: the join is still found, the drops are skipped."""
-    import tendon_taichi.consolidation as cons
+    import tendon_taichi.extract.consolidation as cons
     from tendon_taichi.errors import ConvergenceError
 
     p, paths, eq = planted

@@ -11,7 +11,7 @@ from conftest import PLANTED, lattice_path
 from tendon_taichi import Model, NewtonSolver, build_problem, load_scene, parse_scene
 from tendon_taichi.extraction import (FiberView, IdealizedState, MetricSettings, PluginError, Tendon,
                                       available_extractors, load_extractor, tendon_metrics)
-from tendon_taichi.realizable import solve_realizable, tendon_cables
+from tendon_taichi.extract.realizable import solve_realizable, tendon_cables
 
 BUILTIN = ["network_discovery", "path_cover", "strands"]
 

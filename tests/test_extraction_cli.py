@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tendon_taichi.recording import read_recording
+from tendon_taichi.io.recording import read_recording
 
 PLUGIN = Path(__file__).parent / "plugins" / "demo_extractor"
 
@@ -140,7 +140,7 @@ def test_extract_bad_input(run_rrd, cli, tmp_path):
               "--screen must be an integer >= 0")
     _one_line(cli("extract", tmp_path / "none.rrd", "--extractor", "strands"), "does not exist")
     from tendon_taichi import build_problem, load_scene
-    from tendon_taichi.recording import Recorder
+    from tendon_taichi.io.recording import Recorder
     p = build_problem(load_scene("finger"), 1)
     empty = Recorder(tmp_path / "empty.rrd", p, p.scene.optimize, {"run_id": "e", "resolution": 1})
     empty.write_header()

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from tendon_taichi import CableSet, Model, NewtonSolver, build_problem, load_scene, parse_scene
-from tendon_taichi.objectives import State, StrandEndTerm, smoothstep
+from tendon_taichi.objective import State, StrandEndTerm, smoothstep
 from tendon_taichi.optimizer import SoftIK, schedule_done, settled, stage_k
-from tendon_taichi.runs import optimize
+from tendon_taichi.apps.optimize import optimize
 
 from reference import objective_fd
 

@@ -5,8 +5,8 @@ import numpy as np
 from reference import lame, neo_hookean_P, neo_hookean_psi
 
 from tendon_taichi import CableSet, Model
-from tendon_taichi.mesh import triangulate_polygon
-from tendon_taichi.scene import Material
+from tendon_taichi.body.mesh import triangulate_polygon
+from tendon_taichi.body.scene import Material
 
 
 def test_uniform_deformation_gives_analytic_stress():

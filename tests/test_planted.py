@@ -11,8 +11,8 @@ import pytest
 
 from tendon_taichi import (CableSet, InputError, Model, NewtonSolver, build_problem, builtin_scenes,
                            load_scene, parse_scene)
-from tendon_taichi.geometry import points_in_polygon
-from tendon_taichi.planted import layout_json, plant
+from tendon_taichi.body.geometry import points_in_polygon
+from tendon_taichi.planted.plant import layout_json, plant
 
 ROOT = Path(__file__).resolve().parents[1]
 SUITE = ROOT / "benchmarks" / "planted"

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tendon_taichi.errors import InputError
-from tendon_taichi.planted_bench import CSV_COLUMNS, best_extractor, load_suite, totals
+from tendon_taichi.planted.bench import CSV_COLUMNS, best_extractor, load_suite, totals
 
 SUITE = Path(__file__).resolve().parents[1] / "benchmarks" / "planted"
 
@@ -106,7 +106,7 @@ def test_a_one_tendon_planted_case_is_recovered_end_to_end(tmp_path):
     """snake_planted_1t_s1 at level 1 with the default settings: the best extractor
     finds at most planted + 1 tendons, one of them lies along the planted tendon,
     and the realizable robot with only the found tendons reaches the goals."""
-    from tendon_taichi.planted_bench import run_case
+    from tendon_taichi.planted.bench import run_case
 
     layout = json.loads((SUITE / "snake_planted_1t_s1.json").read_text())
     res = run_case(SUITE / "snake_planted_1t_s1.toml", layout, 1, tmp_path)

@@ -12,9 +12,9 @@ import pytest
 
 from tendon_taichi import build_problem, load_scene, parse_scene
 from tendon_taichi.errors import SceneError
-from tendon_taichi.objectives import SparsityTerm, State, union_tension
+from tendon_taichi.objective import SparsityTerm, State, union_tension
 from tendon_taichi.optimizer import SoftIK
-from tendon_taichi.planted import plant, solve_tendons, PlantedTendon
+from tendon_taichi.planted.plant import PlantedTendon, plant, solve_tendons
 
 from reference import objective_fd
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from tendon_taichi import build_problem, load_scene
-from tendon_taichi.recording import Recorder, read_recording
+from tendon_taichi.io.recording import Recorder, read_recording
 
 # five short stages (k = -, 1, 0.5, 0.25, 0.125) on t_shape level 1
 SHORT = ["--stage-iterations", "15", "--k-min", "0.1"]

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from tendon_taichi import SceneError, build_problem, builtin_scenes, load_scene, parse_scene
-from tendon_taichi.geometry import points_in_polygon
-from tendon_taichi.scene import FiberSettings, Material, OptimizeSettings
+from tendon_taichi.body.geometry import points_in_polygon
+from tendon_taichi.body.scene import FiberSettings, Material
+from tendon_taichi.objective.settings import OptimizeSettings
 
 SQUARE = """
 name = "sq"
@@ -64,7 +65,7 @@ def test_resolution_halves_area_and_shrinks_spacing():
 
 
 def _closed_inside(points, outline, holes, tol):
-    from tendon_taichi.geometry import normalize_polygon
+    from tendon_taichi.body.geometry import normalize_polygon
     def near(poly):
         a, b = poly, np.roll(poly, -1, axis=0)
         ab = b - a

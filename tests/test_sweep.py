@@ -15,9 +15,9 @@ import pytest
 from distributed import Client
 
 from conftest import run_cli
-from tendon_taichi.cluster import case_id
+from tendon_taichi.tasks.engine import case_id
 from tendon_taichi.errors import InputError, SceneError
-from tendon_taichi.sweep import load_sweep, parse_sweep, run_case
+from tendon_taichi.apps.sweep import load_sweep, parse_sweep, run_case
 
 TINY = """
 name = "tiny"
@@ -234,7 +234,7 @@ def test_ctrl_c_keeps_the_finished_cases(sweep_file, in_process, tmp_path):
 
 
 def test_a_failing_case_is_recorded_and_the_sweep_goes_on(tmp_path):
-    from tendon_taichi.scene import load_scene
+    from tendon_taichi.body.scene import load_scene
 
     text = load_scene("finger").source
     assert "point = [0.10, 0.01]" in text

@@ -15,10 +15,10 @@ import tempfile
 from pathlib import Path
 
 from tendon_taichi import load_scene
-from tendon_taichi.planted_bench import best_extractor
-from tendon_taichi.plots import plot_story
-from tendon_taichi.runs import optimize
-from tendon_taichi.tendons import extract
+from tendon_taichi.planted.bench import best_extractor
+from tendon_taichi.io.plots import plot_story
+from tendon_taichi.apps.optimize import optimize
+from tendon_taichi.apps.extract import extract
 
 HERE = Path(__file__).resolve().parent
 SUITE = HERE.parent / "planted"

@@ -12,7 +12,8 @@ import tomllib
 from pathlib import Path
 
 from tendon_taichi import load_scene, parse_scene
-from tendon_taichi.planted import plant, plot_layouts, write_planted
+from tendon_taichi.planted.gallery import plot_layouts
+from tendon_taichi.planted.plant import plant, write_planted
 
 HERE = Path(__file__).resolve().parent
 

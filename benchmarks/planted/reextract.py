@@ -22,9 +22,9 @@ import sys
 import time
 from pathlib import Path
 
-from tendon_taichi.consolidation import REFINE, SCREEN, ConsolidationSettings
-from tendon_taichi.planted_bench import load_suite, score_extraction, totals, write_outputs
-from tendon_taichi.tendons import extract
+from tendon_taichi.extract.settings import REFINE, SCREEN, ConsolidationSettings
+from tendon_taichi.planted.bench import load_suite, score_extraction, totals, write_outputs
+from tendon_taichi.apps.extract import extract
 
 
 def rescore(case: dict, consolidation: ConsolidationSettings) -> dict:

@@ -3,7 +3,7 @@
     python benchmarks/sweeps/dask_overhead.py [--workers 2] [--tasks 200]
 
 Prints the local cluster's start-up, each worker's Taichi start-up and
-warm-up (compile) time, and the per-task overhead of tendon_taichi.cluster.run_tasks:
+warm-up (compile) time, and the per-task overhead of tendon_taichi.tasks.engine.run_tasks:
 the wall time of N tasks that do nothing, per task, with and without Dask.
 """
 
@@ -11,7 +11,7 @@ import argparse
 import json
 import time
 
-from tendon_taichi.cluster import Task, run_tasks
+from tendon_taichi.tasks.engine import Task, run_tasks
 
 
 def nothing(i: int) -> dict:

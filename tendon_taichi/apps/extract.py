@@ -1,0 +1,222 @@
+"""Extract tendons from a recorded run, prove them on the realizable robot,
+consolidate them (fewer tendons for almost the same pose) and score them (the
+engine behind the ``extract`` and ``compare`` commands)."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..body.problem import Problem
+from ..errors import InputError
+from ..extract.consolidation import Consolidation, ConsolidationSettings, consolidate
+from ..extract.metrics import MetricSettings, tendon_metrics
+from ..extract.plugins import available_extractors, load_extractor
+from ..extract.protocol import IdealizedState, PluginError, Tendon
+from ..extract.realizable import RealizableResult, solve_realizable_poses
+from ..io.recording import APP_ID, RecordedRun, default_blueprint, mesh_edges, read_chunks, read_recording
+from ..optimizer.soft_ik import state_solver
+from ..physics.model import Model
+
+
+@dataclass
+class ExtractorResult:
+    """One extractor's outcome on one stage; ``error`` is set when it failed."""
+
+    name: str
+    tendons: list[Tendon] = field(default_factory=list)
+    metrics: dict = field(default_factory=dict)
+    realizable: RealizableResult | None = None
+    time_s: float = 0.0
+    error: str | None = None
+    pose_names: list[str] = field(default_factory=list)
+    consolidation: Consolidation | None = None
+
+    def as_json(self) -> dict:
+        out = {"name": self.name, "tendons": [t.as_json() for t in self.tendons],
+               "metrics": self.metrics, "time_s": self.time_s}
+        if self.consolidation is not None:
+            out["consolidation"] = self.consolidation.as_json()
+        if self.realizable is not None:
+            out["realizable"] = {"contraction": self.realizable.contraction.tolist(),
+                                 "ratios": self.realizable.ratios.tolist(),
+                                 "tension": self.realizable.tau.tolist(),
+                                 "iterations": self.realizable.iterations}
+            if self.realizable.poses is not None:
+                out["realizable"]["poses"] = [
+                    {"name": name, "pose_error": r.pose_error, "pose_error_rel": r.pose_error_rel,
+                     "pose_error_max": r.pose_error_max, "contraction": r.contraction.tolist()}
+                    for name, r in zip(self.pose_names, self.realizable.poses)]
+        if self.error is not None:
+            out["error"] = self.error
+        return out
+
+
+@dataclass
+class Extraction:
+    """All extractors run on one recorded stage."""
+
+    run: RecordedRun
+    problem: Problem
+    stage: int
+    state: IdealizedState
+    idealized_pose_error: float
+    results: list[ExtractorResult]
+
+    def as_json(self) -> dict:
+        return {"recording": str(self.run.path), "scene": self.run.meta.get("scene"),
+                "resolution": self.problem.level, "stage": self.stage, "k": self.state.k,
+                "body_size": self.problem.size, "idealized_pose_error": self.idealized_pose_error,
+                "idealized_pose_error_rel": self.idealized_pose_error / self.problem.size,
+                "extractors": [r.as_json() for r in self.results]}
+
+
+def idealized_state(run: RecordedRun, problem: Problem, stage: int, solver: str) -> IdealizedState:
+    """The recorded stage as an extractor sees it: recorded tensions and contractions,
+    and each pose's recorded equilibrium with its tensions (a format-1 recording's
+    equilibria are solved again from rest, exactly as the run solved them)."""
+    rs = run.stages[stage]
+    s = run.settings
+    thr, k = s.active_threshold * s.tension_scale, rs.summary["k"]
+    model = Model.from_problem(problem)
+    acs = rs.ac.reshape(problem.n_poses, -1)
+    poses = []
+    if rs.xs is None:
+        newton = state_solver(model, solver)
+        for ac in acs:
+            eq = newton.solve(ac=ac, x0=problem.mesh.nodes)
+            poses.append(IdealizedState(eq.tau, ac, eq.x, thr, stage, k))
+    else:
+        for ac, x in zip(acs, rs.xs):
+            poses.append(IdealizedState(model.tensions_at(ac, x), ac, np.array(x), thr, stage, k))
+    return IdealizedState(rs.tau, acs.max(axis=0), poses[0].x, thr, stage, k,
+                          poses if len(poses) > 1 else None)
+
+
+def _check_tendons(name: str, tendons, problem: Problem) -> list[Tendon]:
+    if not isinstance(tendons, (list, tuple)) or not all(isinstance(t, Tendon) for t in tendons):
+        raise PluginError(f"extractor '{name}' did not return a list of Tendon")
+    nf = problem.fibers.n_fibers
+    for t in tendons:
+        if len(t.nodes) < 2 or len(t.fibers) != len(t.nodes) - 1 or np.any(np.asarray(t.fibers) >= nf):
+            raise PluginError(f"extractor '{name}' returned a malformed tendon")
+    return list(tendons)
+
+
+def run_extractor(name: str, problem: Problem, state: IdealizedState, options: dict | None,
+                  run: RecordedRun, solver: str, metric_settings: MetricSettings,
+                  consolidation: ConsolidationSettings | None = None) -> ExtractorResult:
+    """Run one extractor, solve its realizable robot, consolidate its tendons
+    (:mod:`~tendon_taichi.extract.consolidation`) and score them; a failing plugin gives a
+    result with ``error`` instead of raising."""
+    t0 = time.perf_counter()
+    try:
+        ext = load_extractor(name)
+        opts = ext.make_options(options) if hasattr(ext, "make_options") else options
+        tendons = _check_tendons(name, ext.extract(problem, state, opts), problem)
+    except PluginError as exc:
+        return ExtractorResult(name, time_s=time.perf_counter() - t0, error=str(exc))
+    except Exception as exc:  # noqa: BLE001 - a plugin's bug must not stop the others
+        msg = str(exc).splitlines()[0] if str(exc) else ""
+        return ExtractorResult(name, time_s=time.perf_counter() - t0,
+                               error=f"extractor '{name}' raised {type(exc).__name__}: {msg}")
+    real = solve_realizable_poses(problem, tendons, state, run.settings, solver)
+    cons = consolidate(problem, tendons, state, run.settings, real, consolidation or ConsolidationSettings(),
+                       solver)
+    tendons, real = cons.tendons, cons.realizable
+    metrics = tendon_metrics(problem, state, tendons, metric_settings)
+    for t, c in zip(tendons, np.atleast_2d(real.contraction)[0]):  # (several poses: the first's)
+        t.contraction = float(c)
+    L = problem.size
+    ideal = run.stages[state.stage].summary["pose_error"]
+    metrics.update(realizable_pose_error=real.pose_error, realizable_pose_error_rel=real.pose_error_rel,
+                   idealized_pose_error_rel=ideal / L,
+                   realizable_ratio=real.pose_error / ideal if ideal > 0 else float("inf"))
+    metrics["extracted_count"] = cons.extracted_count
+    if real.poses is not None:
+        metrics["realizable_pose_errors_rel"] = [r.pose_error_rel for r in real.poses]
+    return ExtractorResult(name, tendons, metrics, real, time.perf_counter() - t0,
+                           pose_names=problem.pose_names, consolidation=cons)
+
+
+def extract(path: str | Path, names: list[str] | None = None, stage: int | None = None,
+            options: dict[str, dict] | None = None, solver: str = "recorded",
+            metric_settings: MetricSettings | None = None, record: bool = True,
+            consolidation: ConsolidationSettings | None = None) -> Extraction:
+    """Run extractors (default: every installed one) on a recorded stage (default:
+    the last completed), each followed by consolidation (default settings unless
+    ``consolidation`` is given); with ``record``, log their tendons into the recording."""
+    run = read_recording(path)
+    if not run.stages:
+        raise InputError(f"'{path}' has no completed stage to extract from")
+    if stage is None:
+        stage = len(run.stages) - 1
+    if not 0 <= stage < len(run.stages):
+        raise InputError(f"--stage {stage} is not in the recording (stages 0..{len(run.stages) - 1})")
+    names = list(names) if names else sorted(available_extractors())
+    options = options or {}
+    unknown_opts = set(options) - set(names)
+    if unknown_opts:
+        raise InputError(f"options given for extractor(s) not run: {', '.join(sorted(unknown_opts))}")
+    solver = run.meta.get("solver", "auto") if solver == "recorded" else solver
+    problem = run.problem()
+    state = idealized_state(run, problem, stage, solver)
+    ms = metric_settings or MetricSettings()
+    results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation) for n in names]
+    out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
+    if record and any(r.error is None for r in results):
+        log_tendons(out)
+    return out
+
+
+def log_tendons(ex: Extraction) -> None:
+    """Add each extractor's tendons (rest and realizable) and summary to the run's
+    recording under ``/tendons/<extractor>`` at the stage they came from. rerun
+    files cannot be appended to, so the recording is rewritten (to a temporary
+    file, then renamed over the original); an earlier extraction by the same
+    extractor at the same stage is replaced."""
+    import rerun as rr
+
+    path = Path(ex.run.path)
+    names = {r.name for r in ex.results if r.error is None}
+    keep = []
+    chunks, _ = read_chunks(path)
+    for ch in chunks:
+        parts = ch.entity_path.split("/")
+        if len(parts) > 2 and parts[1] == "tendons" and parts[2] in names and "stage" in ch.timeline_names:
+            if ex.stage in ch.to_record_batch().column("stage").to_pylist():
+                continue
+        keep.append(ch)
+    tmp = path.with_name(f".{path.stem}.extract.rrd")
+    rec = rr.RecordingStream(APP_ID, recording_id=ex.run.meta.get("run_id"))
+    rec.save(str(tmp), default_blueprint=default_blueprint())
+    try:
+        rec.send_chunks(keep)
+        rec.set_time("stage", sequence=ex.stage)
+        rec.set_time("iteration", sequence=int(ex.run.stages[ex.stage].summary.get("step", 0)))
+        p = ex.problem
+        edges = mesh_edges(p.mesh.triangles)
+        for r in ex.results:
+            if r.error is not None:
+                continue
+            base = f"/tendons/{r.name}"
+            rest = [t.waypoints.astype(np.float32) for t in r.tendons]
+            rec.log(f"{base}/rest", rr.LineStrips2D(rest, radii=-2.0) if rest else rr.Clear(recursive=False))
+            if r.realizable is not None:
+                x = r.realizable.x
+                c = p.fibers.embedding.positions(p.mesh.triangles, x)
+                rec.log(f"{base}/realizable/mesh", rr.LineStrips2D(x[edges].astype(np.float32),
+                                                                    colors=[(120, 140, 170, 90)], radii=-0.5))
+                if r.tendons:
+                    rec.log(f"{base}/realizable/tendons",
+                            rr.LineStrips2D([c[t.nodes].astype(np.float32) for t in r.tendons], radii=-2.0))
+            rec.log(f"{base}/summary", rr.TextDocument(json.dumps(r.as_json()), media_type="text/plain"))
+        rec.flush()
+    finally:
+        rec.disconnect()
+    os.replace(tmp, path)

@@ -1,0 +1,125 @@
+"""Plane geometry on polygons and segments: orientation and predicates of the
+outline and holes, distances to segments (shapely), and where a set of
+segments crosses a mesh boundary (numpy, vectorized)."""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+
+
+def signed_area(poly: np.ndarray) -> float:
+    """Shoelace area of a closed polygon (k, 2); positive when counter-clockwise."""
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def normalize_polygon(poly: np.ndarray, ccw: bool = True) -> np.ndarray:
+    """Drop a repeated closing point and orient the polygon as asked."""
+    poly = np.asarray(poly, dtype=float)
+    if len(poly) > 3 and np.allclose(poly[0], poly[-1]):
+        poly = poly[:-1]
+    if (signed_area(poly) > 0) != ccw:
+        poly = poly[::-1]
+    return np.ascontiguousarray(poly)
+
+
+def _spike(poly: np.ndarray, scale: float) -> bool:
+    """Two adjacent edges folding back onto each other."""
+    a, b, c = poly, np.roll(poly, -1, axis=0), np.roll(poly, -2, axis=0)
+    cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    back = ((b - a) * (c - b)).sum(axis=1) < 0
+    return bool(np.any((np.abs(cross) <= 1e-12 * scale * scale) & back))
+
+
+def polygon_self_intersects(poly: np.ndarray) -> bool:
+    """True for a degenerate polygon (repeated points, zero area, spikes) or one whose
+    edges cross or touch anywhere but at shared corners."""
+    poly = normalize_polygon(poly)
+    k = len(poly)
+    scale = np.ptp(poly, axis=0).max()
+    if k < 3 or scale == 0.0 or abs(signed_area(poly)) <= 1e-12 * scale * scale:
+        return True
+    edges = np.linalg.norm(np.roll(poly, -1, axis=0) - poly, axis=1)
+    if edges.min() <= 1e-12 * scale or _spike(poly, scale):
+        return True
+    return not shapely.LinearRing(poly).is_simple
+
+
+def points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Whether each point lies strictly inside the polygon (k, 2): bool (q,); points
+    on its boundary are outside."""
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
+    return shapely.contains_xy(shapely.Polygon(poly), p[:, 0], p[:, 1])
+
+
+def polygons_overlap(outline: np.ndarray, holes) -> str | None:
+    """Describe the first way ``holes`` fail to lie strictly inside ``outline`` and
+    apart from each other, or None when they are fine."""
+    body = shapely.Polygon(outline)
+    rings = [shapely.Polygon(h) for h in holes]
+    for i, hole in enumerate(rings):
+        if not body.contains(hole):
+            return f"holes[{i}] is not inside the outline"
+        if hole.boundary.intersects(body.boundary):
+            return f"holes[{i}] touches or crosses the outline"
+        for j, other in enumerate(rings):
+            if j == i:
+                continue
+            if hole.boundary.intersects(other.boundary):
+                return f"holes[{i}] touches or crosses holes[{j}]"
+            if hole.contains(other):
+                return f"holes[{j}] lies inside holes[{i}]"
+    return None
+
+
+def segments(a: np.ndarray, b: np.ndarray):
+    """The segments a[j] -> b[j] (e, 2) as one shapely geometry (for distances)."""
+    return shapely.multilinestrings(np.stack([a, b], axis=1))
+
+
+def distance_to_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray, lines=None) -> np.ndarray:
+    """Distance (q,) from points (q, 2) to the nearest of segments a[j] -> b[j] (e, 2)
+    (or to ``lines``, those segments made once by :func:`segments`); inf when there is
+    no segment."""
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(a) == 0:
+        return np.full(len(p), np.inf)
+    return shapely.distance(shapely.points(p), segments(a, b) if lines is None else lines)
+
+
+def segment_params_on_edges(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray,
+                            tol: float) -> list[np.ndarray]:
+    """For segments p0[i]->p1[i] (s, 2) and edges q0[j]->q1[j] (e, 2): per segment the
+    parameters t in [0, 1] where it meets any edge (crossing, touching, or the ends
+    of a collinear overlap). ``tol`` is a length."""
+    d = p1 - p0  # (s, 2)
+    e = q1 - q0  # (e, 2)
+    w = q0[None, :, :] - p0[:, None, :]  # (s, e, 2)
+    denom = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]  # cross(d, e)
+    cross_we = w[..., 0] * e[None, :, 1] - w[..., 1] * e[None, :, 0]
+    cross_wd = w[..., 0] * d[:, None, 1] - w[..., 1] * d[:, None, 0]
+    dl = np.linalg.norm(d, axis=1)[:, None]
+    el = np.linalg.norm(e, axis=1)[None, :]
+    parallel = np.abs(denom) <= 1e-12 * dl * el
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(parallel, np.nan, cross_we / denom)
+        u = np.where(parallel, np.nan, cross_wd / denom)
+    tt, ut = tol / np.maximum(dl, 1e-300), tol / np.maximum(el, 1e-300)
+    hit = (~parallel) & (t >= -tt) & (t <= 1 + tt) & (u >= -ut) & (u <= 1 + ut)
+    # collinear overlaps: project the edge ends onto the segment
+    dist_line = np.abs(cross_we) / np.maximum(el, 1e-300)  # distance of p0 from the edge's line
+    coll = parallel & (dist_line <= tol)
+    dd = np.maximum((d * d).sum(axis=1), 1e-300)[:, None]
+    t0 = ((q0[None, :, :] - p0[:, None, :]) * d[:, None, :]).sum(-1) / dd
+    t1 = ((q1[None, :, :] - p0[:, None, :]) * d[:, None, :]).sum(-1) / dd
+    out = []
+    for i in range(len(p0)):
+        ts = list(t[i, hit[i]])
+        if coll[i].any():
+            for a, b in zip(t0[i, coll[i]], t1[i, coll[i]]):
+                lo, hi = min(a, b), max(a, b)
+                if hi >= -tt[i, 0] and lo <= 1 + tt[i, 0]:
+                    ts.extend([lo, hi])
+        out.append(np.clip(np.array(ts, dtype=float), 0.0, 1.0))
+    return out

@@ -1,0 +1,131 @@
+"""A problem: a scene at one resolution level, meshed, rigged and embedded.
+
+:func:`build_problem` turns a :class:`~tendon_taichi.scene.Scene` into the
+arrays every solver works on: the rest mesh, the clamped nodes, the fiber
+graph and the embedded target points (DESIGN.md sections 2 and 6).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import cached_property
+
+import numpy as np
+
+from .cables import CableSet
+from ..errors import SceneError
+from .fibers import FiberGraph, build_lattice
+from .mesh import Embedding, Mesh, read_mesh, refine, triangulate_polygon
+from .scene import Scene
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """A scene at resolution ``level``: ``mesh``, ``fixed`` (bool per node),
+    ``fibers``, and targets (``target`` embedding, ``target_goal`` (t, 2), m) -
+    those of every pose, pose after pose (:attr:`target_pose`); :meth:`pose`
+    gives one pose's problem."""
+
+    scene: Scene
+    level: int
+    mesh: Mesh
+    fixed: np.ndarray
+    fibers: FiberGraph
+    target: Embedding
+    target_goal: np.ndarray
+
+    @property
+    def size(self) -> float:
+        """Body size L (bounding-box diagonal), m."""
+        return self.mesh.size
+
+    @property
+    def material(self):
+        return self.scene.body.material
+
+    @property
+    def force_scale(self) -> float:
+        """E h L, N: the scale of the equilibrium's force residual."""
+        m = self.material
+        return m.youngs_modulus * m.thickness * self.size
+
+    @cached_property
+    def fiber_cables(self) -> CableSet:
+        """The fiber lattice as single-segment cables of EA = the scene's stiffness."""
+        return CableSet.fibers(self.fibers.embedding, self.fibers.edges, self.fibers.a0,
+                               self.scene.fibers.stiffness)
+
+    @property
+    def n_poses(self) -> int:
+        return len(self.scene.poses)
+
+    @property
+    def pose_names(self) -> list[str]:
+        return [p.name for p in self.scene.poses]
+
+    @property
+    def target_pose(self) -> np.ndarray:
+        """int (t,): the pose each target belongs to."""
+        return self.scene.target_pose
+
+    def pose(self, i: int) -> "Problem":
+        """The problem of pose ``i`` alone (same mesh and fibers, that pose's targets)."""
+        return self if self.n_poses == 1 else self._pose_problems[i]
+
+    @cached_property
+    def _pose_problems(self) -> list["Problem"]:
+        out = []
+        for i, pose in enumerate(self.scene.poses):
+            sel = self.target_pose == i
+            out.append(replace(self, scene=replace(self.scene, poses=(pose,)),
+                               target=Embedding(self.target.tri[sel], self.target.bary[sel]),
+                               target_goal=self.target_goal[sel]))
+        return out
+
+    def target_positions(self, x: np.ndarray) -> np.ndarray:
+        """Where the target points are (t, 2) for node positions ``x`` (n, 2)."""
+        return self.target.positions(self.mesh.triangles, x)
+
+    def counts(self) -> dict:
+        return {"nodes": self.mesh.n_nodes, "triangles": self.mesh.n_triangles,
+                "fibers": self.fibers.n_fibers, "dofs": int(2 * (~self.fixed).sum())}
+
+
+def _mesh_for_level(scene: Scene, level: int) -> Mesh:
+    body = scene.body
+    if body.mesh_file is None:
+        return triangulate_polygon(body.outline, body.holes, body.max_triangle_area / 2 ** (level - 1))
+    mesh = read_mesh(body.mesh_file)
+    base = body.max_triangle_area or float(np.abs(mesh.areas).max())
+    area = base / 2 ** (level - 1)
+    if level > 1 or np.abs(mesh.areas).max() > area * (1 + 1e-9):
+        mesh = refine(mesh, area)
+    return mesh
+
+
+def build_problem(scene: Scene, level: int = 1) -> Problem:
+    """Mesh, rig and embed ``scene`` at resolution ``level`` (1, 2, ...): each level
+    halves the largest triangle area and divides the fiber spacing by sqrt(2)."""
+    if not isinstance(level, (int, np.integer)) or level < 1:
+        raise SceneError(f"resolution must be an integer >= 1 (got {level!r})")
+    mesh = _mesh_for_level(scene, int(level))
+    L = mesh.size
+    tol = 1e-9 * L
+    fixed = np.zeros(mesh.n_nodes, dtype=bool)
+    for box in scene.fixed:
+        fixed |= box.contains(mesh.nodes, tol)
+    if not fixed.any():
+        raise SceneError(f"{scene.origin}: no mesh node lies in any [[fixed]] box: "
+                         "the body is not clamped")
+    spacing = scene.fibers.spacing / np.sqrt(2.0) ** (level - 1)
+    fibers = build_lattice(mesh, spacing, tol)
+    if fibers.n_fibers == 0:
+        raise SceneError(f"{scene.origin}: no fiber fits inside the body at spacing {spacing:g} m")
+    points = np.array([t.point for t in scene.targets], dtype=float)
+    target, dist = mesh.locate(points, max_dist=tol)
+    outside = np.flatnonzero(dist > tol)
+    if len(outside):
+        i = int(outside[0])
+        raise SceneError(f"{scene.origin}: {scene.target_label(i)}.point {tuple(points[i])} lies outside the body")
+    goals = np.array([t.goal for t in scene.targets], dtype=float)
+    return Problem(scene, int(level), mesh, fixed, fibers, target, goals)

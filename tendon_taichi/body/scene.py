@@ -1,0 +1,339 @@
+"""Scene files: the TOML format of DESIGN.md section 6, validated into typed objects.
+
+Units are SI throughout (metres, pascals, newtons, kilograms). Every key is
+optional unless marked *required*; the defaults below are the documented ones.
+
+``[body]``
+    ``outline`` (*required* unless ``mesh``): polygon ``[[x, y], ...]``, m,
+    either orientation. ``holes``: list of polygons. ``mesh``: a triangle mesh
+    file read with meshio (``.msh``, ``.vtu``, ``.obj``, ...), relative to the
+    scene file. ``youngs_modulus`` 5e4 Pa, ``poisson_ratio`` 0.45,
+    ``thickness`` 0.01 m, ``density`` 1100 kg/m^3, ``gravity`` [0, 0] m/s^2,
+    ``max_triangle_area`` 8e-6 m^2 at resolution 1 (halves per level; for a
+    mesh file: the file's mesh at level 1, refined to half its largest area
+    per level).
+``[fibers]``
+    ``spacing`` 0.005 m (divided by sqrt(2) per level), ``stiffness`` (EA)
+    50 N, ``max_contraction`` (cmax) 0.33, ``max_payout`` (pmax) 0.5,
+    ``eps`` 0.01 (width of the cubic zone of the unilateral energy, strain).
+``[[fixed]]`` (*required*, one or more)
+    ``box = [[xmin, ymin], [xmax, ymax]]``: nodes inside (edges included) are
+    clamped.
+``[[targets]]`` (*required*, one or more, unless ``[[poses]]``)
+    ``point = [x, y]`` a material point of the body, ``goal = [x, y]`` where
+    it should go, m.
+``[[poses]]`` (instead of ``[[targets]]``: several target poses at once)
+    ``name`` (default ``pose<i>``) and ``[[poses.targets]]`` as above. Each pose
+    gets its own contractions; one tendon layout serves them all.
+``[optimize]``
+    See :class:`OptimizeSettings`.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, replace
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneError
+from ..objective.settings import OptimizeSettings, read_optimize
+from ..tables import TableReader, as_point
+from .geometry import normalize_polygon, polygon_self_intersects, polygons_overlap
+
+
+@dataclass(frozen=True)
+class Material:
+    """Body material and loading: E (Pa), nu, thickness h (m), density (kg/m^3), gravity (m/s^2)."""
+
+    youngs_modulus: float = 5.0e4
+    poisson_ratio: float = 0.45
+    thickness: float = 0.01
+    density: float = 1100.0
+    gravity: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def mu(self) -> float:
+        """First Lame parameter-like shear modulus E / (2 (1 + nu)), Pa."""
+        return self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
+
+    @property
+    def lam(self) -> float:
+        """Lame's lambda E nu / ((1 + nu)(1 - 2 nu)), Pa."""
+        nu = self.poisson_ratio
+        return self.youngs_modulus * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+
+@dataclass(frozen=True)
+class Body:
+    """The body's shape (an outline with holes, or a mesh file) and its material."""
+
+    outline: np.ndarray | None  # (k, 2), counter-clockwise after loading
+    holes: tuple[np.ndarray, ...]  # each (k, 2), clockwise after loading
+    mesh_file: Path | None
+    material: Material
+    max_triangle_area: float | None  # m^2 at level 1
+
+
+@dataclass(frozen=True)
+class FiberSettings:
+    """The idealized robot's fiber lattice (DESIGN.md section 2)."""
+
+    spacing: float = 0.005
+    stiffness: float = 50.0
+    max_contraction: float = 0.33
+    max_payout: float = 0.5
+    eps: float = 0.01
+
+
+@dataclass(frozen=True)
+class Box:
+    """An axis-aligned box, edges included: ``lo`` and ``hi`` corners, m."""
+
+    lo: tuple[float, float]
+    hi: tuple[float, float]
+
+    def contains(self, points: np.ndarray, tol: float = 0.0) -> np.ndarray:
+        p = np.asarray(points, dtype=float)
+        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
+        return np.all((p >= lo - tol) & (p <= hi + tol), axis=1)
+
+
+@dataclass(frozen=True)
+class Target:
+    """A material point (rest coordinates, m) and its goal position (m)."""
+
+    point: tuple[float, float]
+    goal: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A named target pose: the material points and goals to reach at once."""
+
+    name: str
+    targets: tuple[Target, ...]
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene. ``source`` is the TOML text it was read from."""
+
+    name: str
+    body: Body
+    fibers: FiberSettings
+    fixed: tuple[Box, ...]
+    poses: tuple[Pose, ...]
+    optimize: OptimizeSettings
+    source: str
+    origin: str  # a file path, or "builtin:<name>"
+
+    @property
+    def targets(self) -> tuple[Target, ...]:
+        """Every pose's targets, pose after pose."""
+        return tuple(t for p in self.poses for t in p.targets)
+
+    @property
+    def target_pose(self) -> np.ndarray:
+        """int (t,): the pose each of :attr:`targets` belongs to."""
+        return np.repeat(np.arange(len(self.poses)), [len(p.targets) for p in self.poses])
+
+    def target_label(self, i: int) -> str:
+        """How the scene file names target ``i`` of :attr:`targets` (for messages)."""
+        if len(self.poses) == 1:
+            return f"targets[{i}]"
+        p = int(self.target_pose[i])
+        first = sum(len(q.targets) for q in self.poses[:p])
+        return f"poses[{p}].targets[{i - first}]"
+
+    def with_optimize(self, **changes) -> "Scene":
+        """A copy with some optimize settings replaced (CLI overrides)."""
+        return replace(self, optimize=replace(self.optimize, **changes))
+
+
+# --------------------------------------------------------------------------- parsing
+
+def _read_body(r: TableReader, base_dir: Path | None, check_files: bool = True) -> Body:
+    E = r.number("youngs_modulus", Material.youngs_modulus, gt=0.0)
+    nu = r.number("poisson_ratio", Material.poisson_ratio, gt=-1.0, lt=0.5)
+    h = r.number("thickness", Material.thickness, gt=0.0)
+    rho = r.number("density", Material.density, ge=0.0)
+    g = r.point("gravity", Material.gravity)
+    material = Material(E, nu, h, rho, g)
+    area = r.number("max_triangle_area", None, gt=0.0)
+
+    outline, holes, mesh_file = None, (), None
+    if r.has("mesh") == r.has("outline"):
+        raise SceneError(f"{r.origin}: [body] needs exactly one of 'outline' or 'mesh'")
+    if r.has("mesh"):
+        name = r.raw("mesh")
+        if not isinstance(name, str) or not name:
+            raise SceneError(f"{r.origin}: body.mesh must be a file name")
+        mesh_file = Path(name)
+        if not mesh_file.is_absolute():
+            mesh_file = (base_dir or Path.cwd()) / mesh_file
+        if check_files and not mesh_file.is_file():
+            raise SceneError(f"{r.origin}: body.mesh file '{mesh_file}' does not exist")
+        if r.has("holes"):
+            raise SceneError(f"{r.origin}: body.holes cannot be combined with body.mesh")
+    else:
+        outline = r.polygon(r.raw("outline"), "outline")
+        if polygon_self_intersects(outline):
+            raise SceneError(f"{r.origin}: body.outline is self-intersecting or degenerate")
+        outline = normalize_polygon(outline, ccw=True)
+        if r.has("holes"):
+            raw = r.raw("holes")
+            if not isinstance(raw, list):
+                raise SceneError(f"{r.origin}: body.holes must be a list of polygons")
+            hs = []
+            for i, poly in enumerate(raw):
+                hole = r.polygon(poly, f"holes[{i}]")
+                if polygon_self_intersects(hole):
+                    raise SceneError(f"{r.origin}: body.holes[{i}] is self-intersecting or degenerate")
+                hs.append(normalize_polygon(hole, ccw=False))
+            holes = tuple(hs)
+            problem = polygons_overlap(outline, holes)
+            if problem:
+                raise SceneError(f"{r.origin}: body.{problem}")
+        if area is None:
+            area = 8.0e-6
+    r.finish()
+    return Body(outline, holes, mesh_file, material, area)
+
+
+def _read_fibers(r: TableReader) -> FiberSettings:
+    d = FiberSettings()
+    fs = FiberSettings(
+        spacing=r.number("spacing", d.spacing, gt=0.0),
+        stiffness=r.number("stiffness", d.stiffness, gt=0.0),
+        max_contraction=r.number("max_contraction", d.max_contraction, gt=0.0, lt=1.0),
+        max_payout=r.number("max_payout", d.max_payout, ge=0.0),
+        eps=r.number("eps", d.eps, gt=0.0),
+    )
+    r.finish()
+    return fs
+
+
+def _array_of_tables(doc: TableReader, key: str, prefix: str = "") -> list[dict]:
+    if not doc.has(key):
+        raise SceneError(f"{doc.origin}: at least one [[{prefix}{key}]] entry is required")
+    items = doc.raw(key)
+    if not isinstance(items, list) or not items:
+        raise SceneError(f"{doc.origin}: [[{prefix}{key}]] must be a non-empty array of tables")
+    return items
+
+
+def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None,
+                default_name: str = "scene", check_files: bool = True) -> Scene:
+    """Parse and validate scene TOML ``text``; ``origin`` names it in errors.
+    ``check_files=False`` accepts a mesh file that is not there (a recorded run
+    carries its mesh)."""
+    try:
+        doc_raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{origin}: invalid TOML: {exc}") from None
+    doc = TableReader(doc_raw, "scene", origin)
+    name = doc.raw("name") if doc.has("name") else default_name
+    if not isinstance(name, str) or not name:
+        raise SceneError(f"{origin}: 'name' must be a non-empty string")
+    if not doc.has("body"):
+        raise SceneError(f"{origin}: a [body] table is required")
+    body = _read_body(TableReader(doc.raw("body"), "body", origin), base_dir, check_files)
+    fibers = _read_fibers(TableReader(doc.raw("fibers") if doc.has("fibers") else {}, "fibers", origin))
+
+    fixed = []
+    for i, item in enumerate(_array_of_tables(doc, "fixed")):
+        r = TableReader(item, f"fixed[{i}]", origin)
+        if not r.has("box"):
+            raise SceneError(f"{origin}: fixed[{i}].box is required")
+        box = r.raw("box")
+        if not isinstance(box, list) or len(box) != 2:
+            raise SceneError(f"{origin}: fixed[{i}].box must be [[xmin, ymin], [xmax, ymax]]")
+        lo, hi = (as_point(c, f"{origin}: fixed[{i}].box") for c in box)
+        if lo[0] > hi[0] or lo[1] > hi[1]:
+            raise SceneError(f"{origin}: fixed[{i}].box has min > max")
+        r.finish()
+        fixed.append(Box(lo, hi))
+
+    poses = _read_poses(doc)
+    opt = read_optimize(TableReader(doc.raw("optimize") if doc.has("optimize") else {},
+                                    "optimize", origin), fibers)
+    doc.finish()
+    return Scene(name, body, fibers, tuple(fixed), poses, opt, text, origin)
+
+
+def _read_targets(holder: TableReader, where: str) -> tuple[Target, ...]:
+    targets = []
+    for i, item in enumerate(_array_of_tables(holder, "targets", where)):
+        r = TableReader(item, f"{where}targets[{i}]", holder.origin)
+        targets.append(Target(r.point("point", required=True), r.point("goal", required=True)))
+        r.finish()
+    return tuple(targets)
+
+
+def _read_poses(doc: TableReader) -> tuple[Pose, ...]:
+    """``[[targets]]`` (one pose) or ``[[poses]]`` with their own ``[[poses.targets]]``."""
+    if doc.has("poses") and doc.has("targets"):
+        raise SceneError(f"{doc.origin}: give either [[targets]] (one pose) or [[poses]], not both")
+    if not doc.has("poses"):
+        return (Pose("pose", _read_targets(doc, "")),)
+    poses = []
+    for i, item in enumerate(_array_of_tables(doc, "poses")):
+        r = TableReader(item, f"poses[{i}]", doc.origin)
+        name = r.raw("name") if r.has("name") else f"pose{i}"
+        if not isinstance(name, str) or not name:
+            raise SceneError(f"{doc.origin}: poses[{i}].name must be a non-empty string")
+        poses.append(Pose(name, _read_targets(r, f"poses[{i}].")))
+        r.finish()
+    names = [p.name for p in poses]
+    if len(set(names)) != len(names):
+        raise SceneError(f"{doc.origin}: pose names must differ (got {', '.join(names)})")
+    return tuple(poses)
+
+
+def builtin_scenes() -> list[str]:
+    """Names of the scenes shipped with the package."""
+    folder = resources.files("tendon_taichi") / "scenes"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """Load a built-in scene by name, or a scene TOML file by path."""
+    s = str(name_or_path)
+    path = Path(s)
+    if s.endswith(".toml") or path.is_file():
+        try:
+            text = path.read_text()
+        except FileNotFoundError:
+            raise SceneError(f"scene file '{s}' does not exist") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise SceneError(f"cannot read scene file '{s}': {exc}") from None
+        return parse_scene(text, origin=s, base_dir=path.resolve().parent, default_name=path.stem)
+    if s in builtin_scenes():
+        res = resources.files("tendon_taichi") / "scenes" / f"{s}.toml"
+        return parse_scene(res.read_text(), origin=f"builtin:{s}", base_dir=None, default_name=s)
+    raise SceneError(f"unknown scene '{s}': not a file, and not a built-in scene "
+                     f"({', '.join(builtin_scenes())})")
+
+
+def with_overrides(scene: Scene, overrides: dict, origin: str = "command line") -> Scene:
+    """A copy of ``scene`` with [optimize] settings replaced, validated like the file.
+
+    ``overrides`` maps optimize keys (``homotopy`` keys as ``k0``, ``factor``,
+    ``k_min``) to values; None values are ignored."""
+    table = {k: v for k, v in scene.optimize.__dict__.items() if k != "homotopy"}
+    hom = dict(scene.optimize.homotopy.__dict__)
+    for key, value in overrides.items():
+        if value is None:
+            continue
+        if key in hom:
+            hom[key] = value
+        elif key in table:
+            table[key] = value
+        else:
+            raise SceneError(f"{origin}: unknown optimize setting '{key}'")
+    table["homotopy"] = hom
+    opt = read_optimize(TableReader(table, "optimize", origin), scene.fibers)
+    return replace(scene, optimize=opt)

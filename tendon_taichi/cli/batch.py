@@ -1,0 +1,179 @@
+"""The commands that run many cases: ``bench``, ``planted``, ``planted-bench``
+and ``sweep``, and the Dask flags they share."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from ..errors import InputError
+from .common import SOLVER_CHOICES, add_json, json_out
+from .runs import add_optimize_flags, optimize_overrides
+from .tendons import add_consolidation_flags, consolidation
+
+
+# ------------------------------------------------------------------ bench
+def cmd_bench(args) -> int:
+    from ..apps.bench import run_bench, table
+    from ..body.scene import load_scene
+
+    scene = load_scene(args.scene)
+    if args.repeat < 1 or any(lv < 1 for lv in args.levels):
+        raise InputError("--repeat and --levels must be >= 1")
+    optimize_levels = [] if args.no_optimize else args.optimize_levels
+    workers, scheduler = cluster_args(args)
+    workers = 0 if workers is None and scheduler is None else workers
+    result = run_bench(scene, args.levels, args.solver, args.repeat, args.out, optimize_levels,
+                       args.forward_max_fibers, optimize_solver=args.optimize_solver, workers=workers,
+                       scheduler=scheduler)
+    json_out(args, result)
+    if args.json != "-":
+        print("\n".join(table(result)))
+        ex = result["exponents"]
+        for s, d in sorted(ex.items()):
+            print(f"exponents {s}: " + ", ".join(f"{k[:-2]} {v:.2f}" for k, v in d.items()))
+        print(f"compile {result['compile_s']:.1f} s; machine: {result['machine']['cores']} cores, "
+              f"{result['machine']['cpu']}; outputs in {args.out}/ (bench.json, bench.csv, bench.png)")
+    return 0
+
+
+# ------------------------------------------------------------------ planted
+def cmd_planted(args) -> int:
+    from ..planted.plant import MAX_TENDONS, plant, write_planted
+    from ..body.scene import load_scene
+
+    t0 = time.perf_counter()
+    if not 1 <= args.tendons <= MAX_TENDONS:
+        raise InputError(f"--tendons must be 1..{MAX_TENDONS} (got {args.tendons})")
+    if args.seed < 0:
+        raise InputError(f"--seed must be >= 0 (got {args.seed})")
+    if args.level < 1:
+        raise InputError(f"--level must be >= 1 (got {args.level})")
+    scene = load_scene(args.scene)
+    if not 1 <= args.poses <= 4:
+        raise InputError(f"--poses must be 1..4 (got {args.poses})")
+    text, layout = plant(scene, args.tendons, args.seed, args.level, poses=args.poses)
+    toml_path, json_path = write_planted(args.out, text, layout)
+    pose = layout["pose"]
+    summary = {"name": layout["name"], "scene": layout["scene"], "tendons": args.tendons,
+               "seed": args.seed, "level": args.level, "scene_file": str(toml_path),
+               "layout_file": str(json_path), "planted_length": layout["planted_length"],
+               "lengths": [t["length"] for t in layout["tendons"]],
+               "contraction_ratios": [t["contraction_ratio"] for t in layout["tendons"]],
+               "tensions": [t["tension"] for t in layout["tendons"]],
+               "max_target_displacement": pose["max_target_displacement"],
+               "max_target_displacement_rel": pose["max_target_displacement_rel"],
+               "body_size": pose["body_size"], "draws": layout["draws"], "poses": args.poses,
+               "time_s": time.perf_counter() - t0}
+    json_out(args, summary)
+    if args.json != "-":
+        print(f"{layout['name']}: {args.tendons} tendon{'s' if args.tendons > 1 else ''}, "
+              f"{100 * layout['planted_length']:.1f} cm planted, largest target displacement "
+              f"{100 * pose['max_target_displacement_rel']:.2f} % of L ({layout['draws']} draw"
+              f"{'s' if layout['draws'] > 1 else ''}); wrote {toml_path} and {json_path}")
+    return 0
+
+
+# ------------------------------------------------------------------ planted-bench
+def cmd_planted_bench(args) -> int:
+    from ..planted.bench import run_suite, table
+
+    overrides = optimize_overrides(args)
+    workers, scheduler = cluster_args(args)
+    result = run_suite(args.suite, args.resolution, args.out, overrides, args.extractors, args.solver,
+                       args.cases, workers=workers, scheduler=scheduler, consolidation=consolidation(args))
+    json_out(args, result)
+    if args.json != "-":
+        print("\n".join(table(result)))
+        print(f"outputs in {args.out}/ (planted_bench.json, planted_bench.csv, gallery.png)")
+    return 0
+
+
+# ------------------------------------------------------------------ sweep
+def add_cluster_flags(p: argparse.ArgumentParser, default_workers: str) -> None:
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help=f"worker processes of the local Dask cluster ({default_workers}; 0: run the cases "
+                        f"one after the other in this process)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask cluster (tcp://HOST:PORT of a `dask scheduler`); "
+                        "it is left running")
+
+
+def cluster_args(args) -> tuple[int | None, str | None]:
+    if args.workers is not None and args.workers < 0:
+        raise InputError(f"--workers must be >= 0 (got {args.workers})")
+    return args.workers, args.scheduler
+
+
+def cmd_sweep(args) -> int:
+    from ..apps.sweep import load_sweep, run, table
+
+    workers, scheduler = cluster_args(args)
+    sweep = load_sweep(args.sweep)
+    out = args.out or str(Path("recordings") / "sweeps" / sweep.name)
+    result = run(sweep, out, workers, scheduler)
+    json_out(args, result)
+    if args.json != "-":
+        print("\n".join(table(result)))
+        print(f"outputs in {out}/ (sweep.json, sweep.csv, sweep.png, cases/)")
+    return 4 if result["failed"] else 0
+
+
+# ------------------------------------------------------------------ the parsers
+def add_commands(sub) -> None:
+    s = sub.add_parser("bench", help="headless resolution-scaling benchmark (JSON, CSV, PNG)")
+    s.add_argument("scene", metavar="SCENE", nargs="?", default="t_shape", help="default t_shape")
+    s.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3], metavar="N")
+    s.add_argument("--solver", nargs="+", choices=SOLVER_CHOICES, default=["cg", "direct"])
+    s.add_argument("--repeat", type=int, default=3, metavar="N", help="runs per timing (default 3)")
+    s.add_argument("--out", default="recordings/bench", metavar="DIR")
+    s.add_argument("--optimize-levels", type=int, nargs="+", default=None, metavar="N",
+                   help="levels at which to run the whole optimization (default: all)")
+    s.add_argument("--no-optimize", action="store_true", help="skip the whole optimizations")
+    s.add_argument("--optimize-solver", choices=("each", "auto"), default="each",
+                   help="run the whole optimization with each solver (default), or once per level "
+                        "with the one --solver auto picks there")
+    s.add_argument("--forward-max-fibers", type=int, default=2500, metavar="N",
+                   help="time forward sensitivities only up to this many fibers (one solve each)")
+    add_cluster_flags(s, "for the whole optimizations; default: run them in this process, after the other "
+                          "measurements")
+    add_json(s)
+    s.set_defaults(func=cmd_bench)
+
+    s = sub.add_parser("planted", help="a scene whose goals random planted tendons reach (a benchmark "
+                                       "with a known answer)")
+    s.add_argument("scene", metavar="SCENE", help="built-in scene name or scene TOML file")
+    s.add_argument("--tendons", type=int, default=2, metavar="N", help="number of tendons, 1..5 (default 2)")
+    s.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
+    s.add_argument("--level", type=int, default=2, metavar="N",
+                   help="resolution level of the planted equilibrium (default 2)")
+    s.add_argument("--poses", type=int, default=1, metavar="P",
+                   help="target poses made by the same tendons, 1..4 (default 1)")
+    s.add_argument("--out", default=".", metavar="DIR",
+                   help="writes DIR/<scene>_planted_<N>t_s<S>[_<P>p].toml and .json (default: .)")
+    add_json(s)
+    s.set_defaults(func=cmd_planted)
+
+    s = sub.add_parser("planted-bench", help="optimize + every extractor on a suite of planted layouts, "
+                                             "scored against what was planted")
+    s.add_argument("suite", metavar="DIR", nargs="?", default="benchmarks/planted",
+                   help="folder of planted cases, NAME.toml + NAME.json (default benchmarks/planted)")
+    s.add_argument("--resolution", type=int, default=2, metavar="N", help="resolution level (default 2)")
+    s.add_argument("--out", default="recordings/planted", metavar="DIR")
+    s.add_argument("--cases", nargs="+", metavar="NAME", help="run only these cases")
+    s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")
+    s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto")
+    add_optimize_flags(s)
+    add_consolidation_flags(s)
+    add_cluster_flags(s, "default: one per core")
+    add_json(s)
+    s.set_defaults(func=cmd_planted_bench)
+
+    s = sub.add_parser("sweep", help="many optimize + extract cases (scenes x levels x a grid of settings) "
+                                     "as tasks on Dask")
+    s.add_argument("sweep", metavar="SWEEP.toml", help="sweep file (docs/cli.md)")
+    s.add_argument("--out", default=None, metavar="DIR", help="default recordings/sweeps/<name>")
+    add_cluster_flags(s, "default: one per core")
+    add_json(s)
+    s.set_defaults(func=cmd_sweep)

@@ -1,0 +1,67 @@
+"""The ``tendon-taichi`` command line (``docs/cli.md``): the parser and the
+one place where errors become exit statuses.
+
+Results go to stdout (``--json`` for machines, to stdout or a file), progress
+and warnings to stderr. Bad input gives one ``tendon-taichi: error: ...`` line
+and exit status 2; an unexpected failure one ``internal error`` line and 1
+(``--debug`` shows the traceback); Ctrl-C exits 130.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from ..errors import InputError, Stopped, TendonError
+from ..physics import runtime
+from . import batch, runs, tendons
+from .common import PROG, Parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = Parser(prog=PROG, description="Design the tendon layout of a 2D soft robot.")
+    p.add_argument("--arch", default=None, help="Taichi backend: cpu (default), cuda, vulkan, gpu")
+    p.add_argument("--threads", type=int, default=None, help="CPU threads for Taichi")
+    p.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    for group in (runs, tendons, batch):
+        group.add_commands(sub)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    debug = "--debug" in argv or os.environ.get("TENDON_TAICHI_DEBUG") == "1"
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if args.command is None:
+            parser.print_help(sys.stderr)
+            return 2
+        if getattr(args, "resolution", 1) < 1:
+            raise InputError(f"--resolution must be >= 1 (got {args.resolution})")
+        runtime.configure(arch=args.arch, threads=args.threads)
+        return int(args.func(args) or 0)
+    except TendonError as exc:
+        if isinstance(exc, Stopped):
+            print(f"{PROG}: {exc}", file=sys.stderr)
+            return 130
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+    except Exception as exc:  # noqa: BLE001 - the one place that turns bugs into one line
+        if debug:
+            raise
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        print(f"{PROG}: internal error: {type(exc).__name__}: {msg} "
+              f"(run with --debug for the traceback)", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,183 @@
+"""The tendon commands: ``extractors``, ``extract`` and ``compare``, and the
+consolidation flags they share with ``planted-bench``."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, TendonError
+from ..extract.settings import BUDGET, GAP, REFINE, SCREEN, TOLERANCE, ConsolidationSettings
+from .common import PROG, SOLVER_CHOICES, add_json, json_out
+
+
+def cmd_extractors(args) -> int:
+    from ..extract.plugins import available_extractors, load_extractor
+
+    rows = []
+    for name, ep in sorted(available_extractors().items()):
+        row = {"name": name, "entry_point": ep.value,
+               "distribution": ep.dist.name if getattr(ep, "dist", None) else None}
+        try:
+            ext = load_extractor(name)
+            row["description"] = ext.description
+            row["options"] = {f.name: f.default for f in ext.option_fields()} \
+                if hasattr(ext, "option_fields") else {}
+        except TendonError as exc:
+            row["error"] = str(exc)
+        rows.append(row)
+    json_out(args, {"extractors": rows})
+    if args.json == "-":
+        return 0
+    for r in rows:
+        if "error" in r:
+            print(f"{r['name']:<20} ERROR: {r['error']}")
+            continue
+        opts = ", ".join(f"{k}={v}" for k, v in r["options"].items())
+        print(f"{r['name']:<20} {r['description']}  [{r['distribution']}]")
+        if opts:
+            print(f"{'':<20} options: {opts}")
+    return 0
+
+
+def _parse_options(items: list[str], default_name: str | None) -> dict[str, dict]:
+    """``k=v`` (for the one extractor) or ``name.k=v`` into {name: {k: v}}."""
+    out: dict[str, dict] = {}
+    for item in items or []:
+        if "=" not in item:
+            raise InputError(f"--option expects key=value (got '{item}')")
+        key, value = item.split("=", 1)
+        name, _, opt = key.rpartition(".")
+        name = name or default_name
+        if not name:
+            raise InputError(f"--option '{item}': say which extractor, as NAME.{key}=value")
+        out.setdefault(name, {})[opt] = value
+    return out
+
+
+def _metric_table(ex) -> list[str]:
+    rows = [f"{'extractor':<18} {'tendons':>7} {'length':>8} {'turning':>8} {'max turn':>8} {'kinks':>5} "
+            f"{'capstan':>7} {'tens.CV':>7} {'coverage':>8} {'realizable':>10} {'x ideal':>7} {'time':>6}"]
+    for r in ex.results:
+        if r.error is not None:
+            rows.append(f"{r.name:<18} failed: {r.error}")
+            continue
+        m = r.metrics
+        count = f"{m['extracted_count']}->{m['count']}" if m["extracted_count"] != m["count"] else m["count"]
+        rows.append(f"{r.name:<18} {count:>7} {100 * m['total_length']:>5.1f} cm "
+                    f"{np.degrees(m['total_turning']):>6.0f} d {np.degrees(m['max_turn']):>6.0f} d "
+                    f"{m['kinks']:>5} {m['capstan_worst']:>7.3f} {m['tension_cv']:>7.3f} "
+                    f"{100 * m['coverage']:>7.1f}% {100 * m['realizable_pose_error_rel']:>9.2f}% "
+                    f"{m['realizable_ratio']:>7.2f} {r.time_s:>5.1f}s")
+    return rows
+
+
+def _extraction_output(args, ex) -> int:
+    out = ex.as_json()
+    failed = [r for r in ex.results if r.error is not None]
+    if getattr(args, "png", None) is not None and len(failed) < len(ex.results):
+        from ..io.plots import plot_compare
+        png = Path(args.recording).with_suffix(".compare.png") if args.png == "-" else Path(args.png)
+        plot_compare(png, ex)
+        out["png"] = str(png)
+    json_out(args, out)
+    if args.json != "-":
+        print(f"{out['recording']}: {out['scene']} level {out['resolution']}, stage {out['stage']} "
+              f"(idealized pose error {100 * out['idealized_pose_error_rel']:.2f}% of L)")
+        print("\n".join(_metric_table(ex)))
+        if "png" in out:
+            print(f"png: {out['png']}")
+    for r in failed:
+        print(f"{PROG}: error: {r.error}", file=sys.stderr)
+    return 4 if failed else 0
+
+
+def add_consolidation_flags(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--consolidate-tol", type=float, default=TOLERANCE, metavar="F",
+                   help="drop or join extracted tendons while the realizable pose error rises by at most "
+                        f"F x L in all (default {TOLERANCE:g}; docs/cli.md 'Consolidation')")
+    p.add_argument("--consolidate-budget", type=float, default=BUDGET, metavar="F",
+                   help="... or while it stays within F x L, the pose error you accept anyway "
+                        f"(default {BUDGET:g}; 0: none)")
+    p.add_argument("--join-gap", type=float, default=GAP, metavar="F",
+                   help=f"join two tendons whose ends are at most F x L apart (default {GAP:g})")
+    p.add_argument("--refine", type=int, default=REFINE, metavar="N",
+                   help="then trim or extend tendon ends, at most N steps in a row, while that lowers the "
+                        f"realizable pose error (default {REFINE}; 0: never)")
+    p.add_argument("--screen", type=int, default=SCREEN, metavar="N",
+                   help="solve in full only the N refinement candidates a Gauss-Newton step predicts best "
+                        f"(default {SCREEN}; 0: solve every one)")
+    p.add_argument("--no-consolidate", action="store_true", help="keep the extracted tendons as they are")
+
+
+def consolidation(args) -> ConsolidationSettings:
+    """The consolidation settings of the command line, validated."""
+    for flag, value in (("--consolidate-tol", args.consolidate_tol), ("--consolidate-budget", args.consolidate_budget),
+                        ("--join-gap", args.join_gap)):
+        if value < 0 or not math.isfinite(value):
+            raise InputError(f"{flag} must be a finite number >= 0 (got {value})")
+    for flag, value in (("--refine", args.refine), ("--screen", args.screen)):
+        if value < 0:
+            raise InputError(f"{flag} must be an integer >= 0 (got {value})")
+    return ConsolidationSettings(-1.0 if args.no_consolidate else args.consolidate_tol, args.join_gap,
+                                 args.consolidate_budget, args.refine, args.screen)
+
+
+def cmd_extract(args) -> int:
+    from ..apps.extract import extract
+
+    options = _parse_options(args.option, args.extractor)
+    ex = extract(args.recording, [args.extractor], stage=args.stage, options=options, solver=args.solver,
+                 record=not args.no_record, consolidation=consolidation(args))
+    r = ex.results[0]
+    if r.error is not None:
+        raise TendonError(r.error)
+    if args.svg:
+        from ..io.export import write_svg
+        write_svg(args.svg, ex.problem, r.tendons, f"{ex.problem.scene.name} - {r.name}")
+    if args.json != "-":
+        for i, t in enumerate(r.tendons):
+            print(f"tendon {i + 1}: {100 * t.length:.1f} cm, {len(t.nodes)} waypoints, tension "
+                  f"{t.tension:.3f} N (sd {t.tension_std:.3f}), contraction {1e3 * (t.contraction or 0):.2f} mm")
+        if args.svg:
+            print(f"svg: {args.svg}")
+    return _extraction_output(args, ex)
+
+
+def cmd_compare(args) -> int:
+    from ..apps.extract import extract
+
+    ex = extract(args.recording, args.extractors, stage=args.stage, options=_parse_options(args.option, None),
+                 solver=args.solver, record=not args.no_record, consolidation=consolidation(args))
+    return _extraction_output(args, ex)
+
+
+# ------------------------------------------------------------------ the parsers
+def add_commands(sub) -> None:
+    s = sub.add_parser("extractors", help="list the installed tendon extractors")
+    add_json(s)
+    s.set_defaults(func=cmd_extractors)
+
+    for name, helptext in (("extract", "extract tendons from a recorded stage with one extractor"),
+                           ("compare", "run several extractors on a recorded stage side by side")):
+        s = sub.add_parser(name, help=helptext)
+        s.add_argument("recording", metavar="RUN.rrd")
+        s.add_argument("--stage", type=int, default=None, metavar="N", help="stage (default: the last)")
+        if name == "extract":
+            s.add_argument("--extractor", required=True, metavar="NAME")
+            s.add_argument("--svg", metavar="OUT.svg", help="drawing of the body and the tendons, in mm")
+        else:
+            s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")
+            s.add_argument("--png", nargs="?", const="-", metavar="FILE",
+                           help="idealized pattern beside each extractor's realizable robot")
+        s.add_argument("--option", action="append", default=[], metavar="K=V",
+                       help="extractor option (compare: NAME.K=V); repeatable")
+        s.add_argument("--solver", choices=("recorded",) + SOLVER_CHOICES, default="recorded")
+        s.add_argument("--no-record", action="store_true", help="do not log the tendons into the recording")
+        add_consolidation_flags(s)
+        add_json(s)
+        s.set_defaults(func=cmd_extract if name == "extract" else cmd_compare)

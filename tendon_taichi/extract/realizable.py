@@ -1,0 +1,168 @@
+"""The realizable robot (``docs/method.md``): the body with only the extracted
+tendons, each a sliding cable through its waypoints (the fiber nodes it
+follows) with one rest length and one tension. Its tendon contractions are
+found by the same soft IK as the idealized robot (pose objective, bounds
+[-pmax, cmax] on c / L0, adjoint gradient) - a handful of variables.
+
+:func:`predict_realizable` estimates a layout's realizable pose error far more
+cheaply, by one Gauss-Newton step from a nearby solved layout; consolidation
+uses it to screen small edits before solving the promising ones in full."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from ..body.cables import CableSet
+from ..body.mesh import Embedding
+from ..body.problem import Problem
+from ..objective.settings import OptimizeSettings
+from ..optimizer.homotopy import RunCallbacks, run_stage
+from ..optimizer.soft_ik import ADJOINT_TOL, EVAL_TOL, PoseSolve, SoftIK, pose_errors
+from ..physics.model import Model
+from ..solve.newton import NewtonSolver
+from .protocol import IdealizedState, Tendon
+
+
+@dataclass
+class RealizableResult:
+    """Tendon contractions ``contraction`` (T,) m and ratios (T,), tensions ``tau``
+    (T,) N, the equilibrium ``x`` (n, 2), pose errors (m; relative to L), and cost."""
+
+    contraction: np.ndarray
+    ratios: np.ndarray
+    tau: np.ndarray
+    x: np.ndarray
+    pose_error: float
+    pose_error_rel: float
+    pose_error_max: float
+    iterations: int
+    evaluations: int
+    time_s: float
+    poses: list["RealizableResult"] | None = None
+
+
+def tendon_cables(problem: Problem, tendons: list[Tendon]) -> CableSet:
+    """Tendons as many-segment cables through their fiber nodes (embedded exactly as
+    the fiber nodes are), with the scene's fiber stiffness as EA."""
+    emb = problem.fibers.embedding
+    ids = np.concatenate([t.nodes for t in tendons]).astype(np.int64)
+    segs, start, base = [], [0], 0
+    for t in tendons:
+        k = len(t.nodes)
+        segs.append(base + np.stack([np.arange(k - 1), np.arange(1, k)], axis=1))
+        start.append(start[-1] + k - 1)
+        base += k
+    a0 = np.array([t.length for t in tendons])
+    return CableSet(Embedding(emb.tri[ids], emb.bary[ids]), np.concatenate(segs),
+                    np.array(start, dtype=np.int64), a0, np.full(len(tendons), problem.scene.fibers.stiffness))
+
+
+def warm_ratios(problem: Problem, tendons: list[Tendon], state: IdealizedState,
+                tensions=None) -> np.ndarray:
+    """Starting c / L0 per tendon: the contraction that gives the tendon its source
+    strand's mean tension (or ``tensions`` (T,) N) at the idealized equilibrium
+    (Z'(e) = tau / EA)."""
+    fs = problem.scene.fibers
+    EA, eps = fs.stiffness, fs.eps
+    c = problem.fibers.embedding.positions(problem.mesh.triangles, state.x) if state.x is not None \
+        else problem.fibers.nodes
+    tensions = [t.tension for t in tendons] if tensions is None else tensions
+    out = []
+    for t, tension in zip(tendons, tensions):
+        L = float(np.linalg.norm(np.diff(c[t.nodes], axis=0), axis=1).sum())
+        z1 = max(tension, 0.0) / EA
+        e = z1 + 0.5 * eps if z1 >= 0.5 * eps else np.sqrt(2.0 * eps * z1)
+        out.append((t.length - L / (1.0 + e)) / t.length)
+    return np.clip(np.array(out), -fs.max_payout, fs.max_contraction)
+
+
+def solve_realizable_poses(problem: Problem, tendons: list[Tendon], state: IdealizedState,
+                           settings: OptimizeSettings, solver: str = "auto", ratios=None) -> RealizableResult:
+    """The realizable robot in every target pose: one layout, its tendon contractions
+    re-solved per pose (warm started from ``ratios`` (P, T) c / L0 where given, else
+    from each tendon's mean tension in that pose).
+    With several poses the result's pose errors cover every pose's targets,
+    ``contraction``, ``ratios`` and ``tau`` are (P, T), ``x`` is the first pose's
+    and ``poses`` holds each pose's result."""
+    if ratios is not None:
+        ratios = np.asarray(ratios, dtype=float).reshape(problem.n_poses, len(tendons))
+    if problem.n_poses == 1:
+        return solve_realizable(problem, tendons, state, settings, solver, start=None if ratios is None else ratios[0])
+    t0 = time.perf_counter()
+    res = []
+    for i, st in enumerate(state.poses):
+        tensions = [float(st.tau[t.fibers].mean()) for t in tendons]
+        res.append(solve_realizable(problem.pose(i), tendons, st, settings, solver, tensions,
+                                    None if ratios is None else ratios[i]))
+    err = np.array([r.pose_error for r in res])
+    pe = float(np.sqrt((err ** 2).sum()))
+    shape = (len(res), len(tendons))
+    return RealizableResult(np.array([r.contraction for r in res]).reshape(shape),
+                            np.array([r.ratios for r in res]).reshape(shape),
+                            np.array([r.tau for r in res]).reshape(shape), res[0].x, pe, pe / problem.size,
+                            max(r.pose_error_max for r in res), sum(r.iterations for r in res),
+                            sum(r.evaluations for r in res), time.perf_counter() - t0, res)
+
+
+def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedState,
+                     settings: OptimizeSettings, solver: str = "auto", tensions=None,
+                     start=None) -> RealizableResult:
+    """Solve the realizable robot's tendon contractions for the problem's targets
+    (one pose), warm started from ``start`` (T,) c / L0, or else :func:`warm_ratios`."""
+    t0 = time.perf_counter()
+    L = problem.size
+    if not tendons:  # the bare body (it sags under gravity, if any)
+        x = NewtonSolver(Model.from_problem(problem, cables=CableSet.empty()), solver).solve().x
+        pe, worst, _ = pose_errors(problem, [x])
+        return RealizableResult(np.zeros(0), np.zeros(0), np.zeros(0), x, pe, pe / L, worst,
+                                0, 0, time.perf_counter() - t0)
+    ik = SoftIK(problem, settings, solver, cables=tendon_cables(problem, tendons))
+    r0 = warm_ratios(problem, tendons, state, tensions) if start is None else np.asarray(start, dtype=float)
+    st = run_stage(ik, 0, r0, RunCallbacks())
+    f = st.figures
+    return RealizableResult(st.ac, st.r, st.tau, st.x, f.pose_error, f.pose_error_rel, f.pose_error_max,
+                            st.iterations, st.evaluations, time.perf_counter() - t0)
+
+
+def predict_realizable(problem: Problem, tendons: list[Tendon], settings: OptimizeSettings, ratios,
+                       positions, solver: str = "auto") -> tuple[float, np.ndarray]:
+    """One Gauss-Newton step of the realizable soft IK: the equilibrium at ``ratios``
+    (P, T) c / L0, warm started from ``positions`` (P, n, 2) m (those of a nearby
+    layout), its target Jacobian (:func:`target_jacobian`), and the bounded linear
+    least-squares step of the pose + contraction objective. Returns the predicted
+    pose error (fraction of L, over every pose) and the ratios (P, T) it predicts
+    them at. Raises ConvergenceError when an equilibrium cannot be solved."""
+    cables = tendon_cables(problem, tendons)
+    ik = SoftIK(problem, settings, solver, cables=cables)
+    ratios = ik.split(ratios)
+    fs, L = problem.scene.fibers, problem.size
+    w = np.sqrt(settings.contraction_reg)
+    err2, out = 0.0, np.empty_like(ratios)
+    for i, ps in enumerate(ik.poses):
+        r = ratios[i]
+        ps.model.set_positions(positions[i])
+        eq = ps.solve(r * cables.a0, EVAL_TOL)
+        res = ((ps.problem.target_positions(eq.x) - ps.problem.target_goal) / L).ravel()
+        A = target_jacobian(ps, cables.a0).reshape(len(res), -1) / L
+        step = lsq_linear(np.vstack([A, w * np.eye(len(r))]), -np.concatenate([res, w * r]),
+                          bounds=(-fs.max_payout - r, fs.max_contraction - r), method="bvls").x
+        err2 += float(np.sum((res + A @ step) ** 2))
+        out[i] = np.clip(r + step, -fs.max_payout, fs.max_contraction)
+    return float(np.sqrt(err2)), out
+
+
+def target_jacobian(ps: PoseSolve, a0: np.ndarray) -> np.ndarray:
+    """d(target positions)/d(c / L0) at the pose's last equilibrium, (t, 2, T) m:
+    per cable j the sensitivity dx*/dr_j = -H^-1 (d2E/dx dac) a0_j e_j, read at the
+    targets (their positions are linear in x)."""
+    def rhs():
+        for j in range(len(a0)):
+            b = ps.model.mixed_product(a0[j] * np.eye(1, len(a0), j).ravel())
+            b[ps.problem.fixed] = 0.0
+            yield b
+
+    return np.stack([-ps.problem.target_positions(dx) for dx in ps.linear.solve_many(rhs(), ADJOINT_TOL)], axis=-1)

@@ -1,0 +1,340 @@
+"""Run recordings in rerun's ``.rrd`` format (rerun-sdk 0.41; ``docs/formats.md``).
+
+Layout (entity paths), timelines ``stage`` and ``iteration`` (the L-BFGS-B
+iteration counted over the whole run):
+
+* static: ``/meta/run`` (JSON: package version, scene name, resolution,
+  effective settings, solver), ``/meta/scene`` (the scene TOML), ``/problem/*``
+  (the rest mesh, clamps, fiber graph, embeddings and targets as f64 tensors,
+  so a run can be rebuilt from the file alone), ``/world/rest_mesh`` and
+  ``/world/rest_fibers`` (the fiber graph);
+* per logged iteration: ``/world/mesh`` (deformed edges), ``/world/fibers``
+  (coloured by tension on a fixed scale, slack fibers faint), ``/world/targets``,
+  ``/world/goals`` (with several poses: the same under ``/world/poses/<name>/``),
+  and scalars ``/metrics/objective/<term>``, ``/metrics/pose_error_rel``,
+  ``/metrics/active_fibers``, ``/metrics/k``;
+* per completed stage (then flushed to disk): ``/stages/ac``, ``/stages/r``
+  (the poses' vectors one after the other, (P f,)), ``/stages/tau`` (the union
+  tension, (f,)), ``/stages/x`` (each pose's equilibrium, (P, n, 2); f64
+  tensors, bit-exact) and ``/stages/summary`` (JSON). A stage counts as
+  completed when its summary is in the file. Recordings of format 1 have no
+  ``/stages/x``; their equilibria are solved again from rest.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import tempfile
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..body.fibers import FiberGraph
+from ..body.mesh import Embedding, Mesh
+from ..body.problem import Problem
+from ..body.scene import parse_scene
+from ..errors import TendonError
+from ..objective.settings import OptimizeSettings, settings_dict, settings_from_dict
+
+APP_ID = "tendon_taichi"
+#: 2: with each stage's equilibria (``/stages/x``)
+FORMAT = 2
+
+
+class RecordingError(TendonError):
+    """A recording is missing, corrupt, foreign or incomplete."""
+
+
+def default_blueprint():
+    """The viewer layout: the body (2D) beside the objective and figure time series."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(rrb.Horizontal(
+        rrb.Spatial2DView(origin="/", name="body", contents=["/world/**", "/tendons/**"]),
+        rrb.Vertical(rrb.TimeSeriesView(origin="/metrics/objective", name="objective terms"),
+                     rrb.TimeSeriesView(origin="/metrics/figures", name="pose error, active fibers")),
+        column_shares=[3, 2]))
+
+
+def mesh_edges(triangles: np.ndarray) -> np.ndarray:
+    """The unique edges (e, 2) of a triangle mesh."""
+    e = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), 1)
+    return np.unique(e, axis=0)
+
+
+def tension_colors(tau: np.ndarray, scale: float, threshold: float) -> np.ndarray:
+    """RGBA (C, 4) uint8 on a fixed scale: 0 .. 2 scale N mapped on 'inferno'; slack
+    fibers (tau <= threshold) faint grey."""
+    from matplotlib import colormaps
+
+    cmap = colormaps["inferno"]
+    t = np.clip(np.asarray(tau) / (2.0 * scale), 0.0, 1.0)
+    rgba = (cmap(0.15 + 0.8 * t) * 255).astype(np.uint8)
+    slack = np.asarray(tau) <= threshold
+    rgba[slack] = (160, 160, 160, 40)
+    return rgba
+
+
+class Recorder:
+    """Writes a run to ``path`` as it goes; each completed stage is flushed to disk."""
+
+    def __init__(self, path: str | Path, problem: Problem, settings: OptimizeSettings,
+                 meta: dict, log_every: int = 1):
+        import rerun as rr
+
+        self.rr = rr
+        self.path = Path(path)
+        self.problem, self.settings = problem, settings
+        self.log_every = max(1, int(log_every))
+        self.edges = mesh_edges(problem.mesh.triangles)
+        self.rec = rr.RecordingStream(APP_ID, recording_id=meta.get("run_id"))
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.rec.save(str(self.path), default_blueprint=default_blueprint())
+        self.meta = {"format": FORMAT, **meta, "settings": settings_dict(settings)}
+
+    def write_header(self) -> None:
+        """The static part: run metadata, scene, problem arrays, rest geometry."""
+        rr, rec, p = self.rr, self.rec, self.problem
+        rec.log("/meta/run", rr.TextDocument(json.dumps(self.meta, indent=1), media_type="text/plain"),
+                static=True)
+        rec.log("/meta/scene", rr.TextDocument(p.scene.source, media_type="text/plain"), static=True)
+        for name, arr in problem_tensors(p).items():
+            rec.log(f"/problem/{name}", rr.Tensor(np.asarray(arr, dtype=np.float64)), static=True)
+        X = p.mesh.nodes
+        rec.log("/world/rest_mesh", rr.LineStrips2D(X[self.edges].astype(np.float32),
+                                                    colors=[(200, 200, 200, 60)], radii=-0.5),
+                static=True)
+        rec.log("/world/rest_fibers", rr.LineStrips2D(p.fibers.nodes[p.fibers.edges].astype(np.float32),
+                                                      colors=[(150, 150, 150, 30)], radii=-0.5),
+                static=True)
+        self.rec.flush()
+
+    def copy_from(self, chunks) -> None:
+        """Re-send chunks read from an earlier recording (resume into a new file)."""
+        self.rec.send_chunks(chunks)
+        self.rec.flush()
+
+    def iteration(self, step: int, stage: int, k: float | None, figures, xs: np.ndarray,
+                  taus: np.ndarray, force: bool = False) -> None:
+        """Log one L-BFGS-B iteration (``step`` counts over the whole run) with the
+        per-pose positions ``xs`` (P, n, 2) and tensions ``taus`` (P, C)."""
+        rr, rec = self.rr, self.rec
+        rec.set_time("stage", sequence=stage)
+        rec.set_time("iteration", sequence=step)
+        for name, value in figures.objective.items():
+            rec.log(f"/metrics/objective/{name}", rr.Scalars(float(value)))
+        rec.log("/metrics/figures/pose_error_rel", rr.Scalars(float(figures.pose_error_rel)))
+        rec.log("/metrics/figures/active_fibers", rr.Scalars(float(figures.active_fibers)))
+        rec.log("/metrics/figures/k", rr.Scalars(float(k) if k is not None else float("nan")))
+        if not force and step % self.log_every:
+            return
+        names = self.problem.pose_names
+        for i, (x, tau) in enumerate(zip(xs, taus)):
+            self._body(f"/world/poses/{names[i]}" if len(names) > 1 else "/world", self.problem.pose(i), x, tau)
+
+    def _body(self, base: str, p: Problem, x: np.ndarray, tau: np.ndarray) -> None:
+        """The deformed mesh, fibers by tension, targets and goals of one pose under ``base``."""
+        rr, rec = self.rr, self.rec
+        rec.log(f"{base}/mesh", rr.LineStrips2D(x[self.edges].astype(np.float32),
+                                                colors=[(120, 140, 170, 90)], radii=-0.5))
+        c = p.fibers.embedding.positions(p.mesh.triangles, x)
+        strips = c[p.fibers.edges].astype(np.float32)
+        thr = self.settings.active_threshold * self.settings.tension_scale
+        rec.log(f"{base}/fibers", rr.LineStrips2D(strips, colors=tension_colors(tau, self.settings.tension_scale,
+                                                                                thr), radii=-1.5))
+        rec.log(f"{base}/targets", rr.Points2D(p.target_positions(x), colors=[(40, 120, 255)], radii=-4.0))
+        rec.log(f"{base}/goals", rr.Points2D(p.target_goal, colors=[(40, 200, 80)], radii=-4.0))
+
+    def stage(self, result, step: int) -> None:
+        """Log a completed stage losslessly and flush it to disk."""
+        rr, rec = self.rr, self.rec
+        rec.set_time("stage", sequence=result.stage)
+        rec.set_time("iteration", sequence=step)
+        rec.log("/stages/r", rr.Tensor(np.asarray(result.r, dtype=np.float64)))
+        rec.log("/stages/ac", rr.Tensor(np.asarray(result.ac, dtype=np.float64)))
+        rec.log("/stages/tau", rr.Tensor(np.asarray(result.tau, dtype=np.float64)))
+        if result.xs is not None:
+            rec.log("/stages/x", rr.Tensor(np.asarray(result.xs, dtype=np.float64)))
+        summary = {**result.summary(), "step": step, "message": result.message}
+        rec.log("/stages/summary", rr.TextDocument(json.dumps(summary), media_type="text/plain"))
+        rec.flush()
+
+    def log(self, entity: str, archetype, static: bool = False) -> None:
+        self.rec.log(entity, archetype, static=static)
+
+    def close(self) -> None:
+        self.rec.flush()
+        self.rec.disconnect()
+
+
+def problem_tensors(p: Problem) -> dict[str, np.ndarray]:
+    """The arrays that rebuild a Problem without meshing (all stored as f64)."""
+    return {"nodes": p.mesh.nodes, "triangles": p.mesh.triangles, "fixed": p.fixed,
+            "fiber_nodes": p.fibers.nodes, "fiber_nodes_tri": p.fibers.embedding.tri,
+            "fiber_nodes_bary": p.fibers.embedding.bary, "fibers": p.fibers.edges,
+            "spacing": np.array([p.fibers.spacing]), "target_tri": p.target.tri,
+            "target_bary": p.target.bary, "target_goal": p.target_goal}
+
+
+# ---------------------------------------------------------------- reading
+@dataclass
+class RecordedStage:
+    """One completed stage as recorded: its ``summary`` (the optimize summary's
+    stage figures), ``r`` and ``ac`` (m) (P f,), the union tension ``tau`` (f,) N
+    and each pose's equilibrium ``xs`` (P, n, 2) m (None in format-1 recordings)."""
+
+    summary: dict
+    r: np.ndarray
+    ac: np.ndarray
+    tau: np.ndarray
+    xs: np.ndarray | None = None
+
+
+@dataclass
+class RecordedRun:
+    """What a recording holds: metadata, scene TOML, problem arrays and completed stages."""
+
+    path: Path
+    meta: dict
+    scene_toml: str
+    arrays: dict[str, np.ndarray]
+    stages: list[RecordedStage] = field(default_factory=list)
+    truncated: bool = False
+
+    @property
+    def settings(self) -> OptimizeSettings:
+        return settings_from_dict(self.meta["settings"])
+
+    def problem(self) -> Problem:
+        """Rebuild the problem exactly as it was run (no scene file or meshing needed)."""
+        a = self.arrays
+        scene = parse_scene(self.scene_toml, origin=f"{self.path} (recorded scene)", check_files=False)
+        scene = scene.with_optimize(**{k: v for k, v in self.settings.__dict__.items()})
+        mesh = Mesh(a["nodes"], a["triangles"].astype(np.int64))
+        fibers = FiberGraph(a["fiber_nodes"], Embedding(a["fiber_nodes_tri"].astype(np.int64),
+                                                        a["fiber_nodes_bary"]),
+                            a["fibers"].astype(np.int64), float(a["spacing"][0]))
+        return Problem(scene, int(self.meta["resolution"]), mesh, a["fixed"].astype(bool), fibers,
+                       Embedding(a["target_tri"].astype(np.int64), a["target_bary"]), a["target_goal"])
+
+
+def _complete_prefix(path: Path) -> int:
+    """Length of the longest prefix of an .rrd made of whole frames (a run killed
+    while writing leaves a torn last frame, which rerun's reader rejects)."""
+    with open(path, "rb") as fh:
+        data = fh.read()
+    off, good = 0, 0
+    while off + 12 <= len(data):
+        if data[off:off + 4] == b"RRF2":
+            off += 12
+            good = off
+            continue
+        if off + 16 > len(data):
+            break
+        kind, length = struct.unpack_from("<QQ", data, off)
+        if kind == 0 or off + 16 + length > len(data):
+            break
+        off += 16 + length
+        good = off
+    return good
+
+
+def read_chunks(path: Path):
+    """All chunks of the first recording store, tolerating a torn tail."""
+    from rerun.chunk import RrdReader
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            return list(RrdReader(path).stream()), False
+        except (RuntimeError, ValueError, OSError):
+            pass
+        n = _complete_prefix(path)
+        if n <= 12:
+            raise RecordingError(f"'{path}' is not a readable rerun recording")
+        fd, tmp = tempfile.mkstemp(suffix=".rrd")
+        try:
+            with open(path, "rb") as src, os.fdopen(fd, "wb") as dst:
+                dst.write(src.read(n))
+            try:
+                return list(RrdReader(tmp).stream()), True
+            except (RuntimeError, ValueError, OSError) as exc:
+                raise RecordingError(f"'{path}' is corrupt: {str(exc).splitlines()[0]}") from None
+        finally:
+            os.unlink(tmp)
+
+
+def _text(rb) -> list[str]:
+    return [t for t in rb.column("TextDocument:text").to_pylist() for t in (t if isinstance(t, list) else [t])]
+
+
+def _tensors(rb) -> list[np.ndarray]:
+    out = []
+    for row in rb.column("Tensor:data").to_pylist():
+        t = row[0]
+        out.append(np.array(t["buffer"], dtype=np.float64).reshape([int(d) for d in t["shape"]]))
+    return out
+
+
+def _stage_values(rb) -> list[int]:
+    return [int(v) for v in rb.column("stage").to_pylist()]
+
+
+def read_recording(path: str | Path) -> RecordedRun:
+    """Read a recording (see the module docstring); raise RecordingError if it is
+    missing, not an .rrd, not a tendon-taichi run, or has no readable header."""
+    path = Path(path)
+    if not path.is_file():
+        raise RecordingError(f"recording '{path}' does not exist")
+    with open(path, "rb") as fh:
+        if fh.read(4) != b"RRF2":
+            raise RecordingError(f"'{path}' is not a rerun recording (.rrd)")
+    chunks, truncated = read_chunks(path)
+    meta, scene, arrays = None, None, {}
+    stages: dict[int, dict] = {}
+    for ch in chunks:
+        ent = ch.entity_path
+        rb = ch.to_record_batch()
+        if ent == "/meta/run":
+            meta = json.loads(_text(rb)[0])
+        elif ent == "/meta/scene":
+            scene = _text(rb)[0]
+        elif ent.startswith("/problem/"):
+            arrays[ent[len("/problem/"):]] = _tensors(rb)[0]
+        elif ent in ("/stages/r", "/stages/ac", "/stages/tau", "/stages/x", "/stages/summary"):
+            key = ent.rsplit("/", 1)[1]
+            values = _text(rb) if key == "summary" else _tensors(rb)
+            for s, v in zip(_stage_values(rb), values):
+                stages.setdefault(s, {})[key] = json.loads(v) if key == "summary" else v
+    if meta is None or meta.get("format") is None or scene is None:
+        raise RecordingError(f"'{path}' is not a tendon-taichi recording (no run metadata)")
+    missing = {"nodes", "triangles", "fixed", "fibers", "fiber_nodes_tri", "fiber_nodes_bary"} - set(arrays)
+    if missing:
+        raise RecordingError(f"'{path}' is incomplete: no {', '.join(sorted(missing))}")
+    done = []
+    for s in sorted(stages):
+        d = stages[s]
+        if s != len(done) or not {"summary", "r", "ac", "tau"} <= set(d):
+            break
+        done.append(RecordedStage(d["summary"], d["r"], d["ac"], d["tau"], d.get("x")))
+    return RecordedRun(path, meta, scene, arrays, done, truncated)
+
+
+def completed_chunks(path: str | Path, stages: int):
+    """The chunks of a recording that belong to its header and first ``stages`` stages
+    (what a resumed run copies)."""
+    chunks, _ = read_chunks(Path(path))
+    keep = []
+    for ch in chunks:
+        if "stage" not in ch.timeline_names:
+            if ch.entity_path.startswith(("/meta", "/problem", "/world/rest_")):
+                keep.append(ch)
+            continue
+        vals = _stage_values(ch.to_record_batch())
+        if vals and max(vals) < stages:
+            keep.append(ch)
+    return keep

@@ -1,0 +1,275 @@
+"""The Taichi model of body + cables: the idealized robot (the fiber lattice)
+or a realizable one (a few tendons).
+
+A :class:`Model` uploads a mesh, its clamps, its material and a cable set
+into the two buffers of :mod:`.layout` once, and gives numpy access to the
+energy ``E_tot(x, ac)``, its gradient, exact and PSD-projected Hessian
+products, the cable tensions and their derivatives, and the mixed products
+``d2E/dx dac`` - the physics of :mod:`.forces`. Solvers (:mod:`tendon_taichi.solve`)
+work on the same buffers, through the public attributes ``fb``, ``ib`` and
+``serial``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..body.cables import CableSet
+from ..body.mesh import Mesh
+from ..body.scene import Material
+from . import forces, runtime
+from .buffers import k_copy_nodes, k_read, k_read_int, k_read_ranges, k_write
+from .layout import Scalar, Slot, allocate, csr
+from .runtime import ti
+
+
+class Model:
+    """Body (mesh, clamps, material) plus cables, on Taichi.
+
+    Parameters: ``mesh`` rest mesh; ``fixed`` bool (n,) clamped nodes;
+    ``material``; ``cables``; ``eps`` the width of the unilateral energy's
+    cubic zone (strain); ``parallel`` forces parallel (True) or serialized
+    (False) loops, ``None`` picks by size.
+    """
+
+    def __init__(self, mesh: Mesh, fixed: np.ndarray, material: Material, cables: CableSet,
+                 eps: float = 0.01, parallel: bool | None = None):
+        runtime.ensure_init()
+        self.mesh, self.material, self.cables, self.eps = mesh, material, cables, float(eps)
+        self.fixed = np.asarray(fixed, dtype=bool)
+        self.n, self.m = mesh.n_nodes, mesh.n_triangles
+        self.S, self.C, self.P = cables.n_segments, cables.n_cables, len(cables.points)
+        self.single = cables.single_segment
+        if parallel is None:
+            parallel = (not runtime.is_cpu()) or (self.m + self.S >= runtime.parallel_threshold())
+        self.parallel = bool(parallel)
+        self.serial = not self.parallel
+        self._upload()
+
+    @classmethod
+    def from_problem(cls, problem, cables: CableSet | None = None,
+                     parallel: bool | None = None) -> "Model":
+        """The model of a :class:`~tendon_taichi.body.problem.Problem` with its fiber
+        lattice (the idealized robot) or the given ``cables``."""
+        return cls(problem.mesh, problem.fixed, problem.material,
+                   problem.fiber_cables if cables is None else cables,
+                   eps=problem.scene.fibers.eps, parallel=parallel)
+
+    # ------------------------------------------------------------ upload
+    def _upload(self) -> None:
+        host = allocate(self.n, self.m, self.S, self.C, self.P, self.single)
+        self.offset = host.offset
+        mesh, cab, mat = self.mesh, self.cables, self.material
+        X, T = mesh.nodes.astype(np.float64), mesh.triangles.astype(np.int64)
+        host.put_int("TRI", T)
+        start, order = csr(T.ravel(), self.n)
+        host.put_int("NE_START", start)
+        host.put_int("NE", order)  # entry = 3 e + corner
+        for name in ("X0", "X", "XT"):
+            host.put_f64(name, X)
+        Dm = np.stack([X[T[:, 1]] - X[T[:, 0]], X[T[:, 2]] - X[T[:, 0]]], axis=2)
+        host.put_f64("BM", np.linalg.inv(Dm))
+        host.put_f64("VOL", mat.thickness * mesh.areas)
+        host.put_f64("MASK", np.repeat((~self.fixed).astype(float)[:, None], 2, axis=1))
+        mass = np.zeros(self.n)
+        np.add.at(mass, T.ravel(), np.repeat(mat.density * mat.thickness * mesh.areas / 3.0, 3))
+        self.node_mass = mass
+        host.put_f64("FEXT", mass[:, None] * np.asarray(mat.gravity, dtype=float)[None, :])
+        # cables
+        host.put_int("PT_TRI", cab.points.tri)
+        host.put_f64("PT_BARY", cab.points.bary)
+        seg_cable = np.repeat(np.arange(self.C), np.diff(cab.start))
+        host.put_int("SEG", np.column_stack([cab.segments, seg_cable]) if self.S else [])
+        host.put_int("CAB_START", cab.start)
+        host.put_f64("A0", cab.a0)
+        host.put_f64("EA", cab.stiffness)
+        # node <- segment incidences: end b with +bary, end a with -bary
+        pt_nodes = T[cab.points.tri] if self.P else np.zeros((0, 3), np.int64)
+        nodes = np.concatenate([pt_nodes[cab.segments[:, e]].ravel() for e in (0, 1)])
+        segs = np.tile(np.repeat(np.arange(self.S), 3), 2)
+        coefs = np.concatenate([s * cab.points.bary[cab.segments[:, e]].ravel()
+                                for e, s in ((0, -1.0), (1, 1.0))]) if self.S else np.zeros(0)
+        start, order = csr(nodes, self.n)
+        host.put_int("NS_START", start)
+        host.put_int("NS", segs[order])
+        host.put_f64("NS_COEF", coefs[order])
+        so = self.offset["SCALARS"]
+        host.fb[so + Scalar.MU], host.fb[so + Scalar.LAM], host.fb[so + Scalar.EPS] = mat.mu, mat.lam, self.eps
+        host.fb[so + Scalar.FLOOR] = 1e-10 * mat.mu * mat.thickness
+        self.Bm = np.linalg.inv(Dm)
+        self.vol = mat.thickness * mesh.areas
+        #: the f64 and i32 buffers (see :mod:`.layout`)
+        self.fb = ti.ndarray(ti.f64, len(host.fb))
+        self.ib = ti.ndarray(ti.i32, len(host.ib))
+        self.fb.from_numpy(host.fb)
+        #: the last gradient dE/dx as the host sees it, (2n,) N
+        self.last_gradient = np.zeros(2 * self.n)
+        self.ib.from_numpy(host.ib.astype(np.int32))
+
+    # ------------------------------------------------------------ host access to the buffers
+    def read(self, name: str, count: int, at: int = 0) -> np.ndarray:
+        """``count`` entries of f64 array ``name`` from entry ``at``, (count,)."""
+        out = np.empty(count, dtype=np.float64)
+        if count:
+            k_read(self.fb, self.offset[name] + at, out)
+        return out
+
+    def write(self, name: str, values: np.ndarray, at: int = 0) -> None:
+        """Write ``values`` into f64 array ``name`` from entry ``at``."""
+        v = np.ascontiguousarray(values, dtype=np.float64).ravel()
+        if len(v):
+            k_write(self.fb, self.offset[name] + at, v)
+
+    def read_many(self, items: list[tuple[str, int]]) -> list[np.ndarray]:
+        """Several arrays (name, count) in one kernel launch."""
+        counts = [c for _, c in items]
+        dst = np.concatenate([[0], np.cumsum(counts)])
+        ranges = np.array([[self.offset[n], c, d] for (n, c), d in zip(items, dst[:-1])], dtype=np.int32)
+        out = np.empty(int(dst[-1]), dtype=np.float64)
+        if len(out):
+            k_read_ranges(self.fb, ranges, out)
+        return [out[a:b] for a, b in zip(dst[:-1], dst[1:])]
+
+    def read_int(self, name: str, at: int = 0) -> int:
+        """Entry ``at`` of the i32 array ``name``."""
+        return int(k_read_int(self.ib, self.offset[name] + at))
+
+    def node_vectors(self, name: str) -> np.ndarray:
+        """The per-node vectors of array ``name`` (n, 2)."""
+        return self.read(name, 2 * self.n).reshape(self.n, 2)
+
+    # ------------------------------------------------------------ state
+    @property
+    def dofs(self) -> int:
+        """Number of free degrees of freedom."""
+        return int(2 * (~self.fixed).sum())
+
+    def positions(self) -> np.ndarray:
+        """Current node positions x (n, 2), m."""
+        return self.node_vectors("X")
+
+    def set_positions(self, x: np.ndarray) -> None:
+        """Set node positions (n, 2); clamped nodes are reset to their rest position."""
+        x = np.array(x, dtype=np.float64).reshape(self.n, 2)
+        x[self.fixed] = self.mesh.nodes[self.fixed]
+        self.write("X", x)
+
+    def set_free_positions(self, x: np.ndarray) -> None:
+        """Set all node positions, clamped ones included (for derivative checks)."""
+        self.write("X", np.asarray(x, dtype=np.float64).reshape(self.n, 2))
+
+    def reset(self) -> None:
+        """Back to the rest positions."""
+        k_copy_nodes(self.fb, self.ib, Slot.X0, Slot.X, self.serial)
+
+    def contraction(self) -> np.ndarray:
+        """Cable contractions ac (C,), m."""
+        return self.read("AC", self.C)
+
+    def set_contraction(self, ac: np.ndarray) -> None:
+        """Set cable contractions ac (C,), m; the rest length a0 - ac must stay positive."""
+        ac = np.asarray(ac, dtype=np.float64).reshape(self.C)
+        if np.any(ac >= self.cables.a0):
+            raise ValueError("a contraction reaches the cable's rest length")
+        self.write("AC", ac)
+
+    # ------------------------------------------------------------ energy and derivatives
+    def energy_and_min_det(self, trial: bool = False) -> tuple[float, float]:
+        """E_tot (J) and the smallest det F at the positions (``trial``: at the line
+        search's trial positions)."""
+        E, jmin = forces.k_energy(self.fb, self.ib, Slot.XT if trial else Slot.X, self.serial)
+        return float(E), float(jmin)
+
+    def energy(self, x: np.ndarray | None = None) -> float:
+        """E_tot (J) at x (default: the current positions); +inf if a triangle is inverted."""
+        if x is not None:
+            self.write("XT", np.asarray(x, dtype=np.float64).reshape(self.n, 2))
+        E, jmin = self.energy_and_min_det(trial=x is not None)
+        return E if jmin > 0.0 else float("inf")
+
+    def gradient_norm2(self) -> float:
+        """Computes the gradient G at the positions (kept on the host as
+        :attr:`last_gradient`); returns |G|^2 over the free DOFs."""
+        return float(forces.k_gradient(self.fb, self.ib, self.last_gradient, self.serial))
+
+    def gradient(self, x: np.ndarray | None = None) -> np.ndarray:
+        """dE_tot/dx (n, 2), N, at x (default: current positions), all nodes; a given
+        x becomes the current positions."""
+        if x is not None:
+            self.set_free_positions(x)
+        self.gradient_norm2()
+        return self.last_gradient.reshape(self.n, 2).copy()
+
+    def prepare_hessian(self, project: bool = False) -> None:
+        """Element tangents (exact or PSD-projected), cable stiffnesses and the
+        block-Jacobi preconditioner at the current x."""
+        forces.k_hessian(self.fb, self.ib, 1 if project else 0, self.serial)
+
+    def hessian_product(self, v: np.ndarray, project: bool = False,
+                        prepare: bool = True) -> np.ndarray:
+        """H v (n, 2) for v (n, 2): the exact (or projected) Hessian of E_tot at x."""
+        if prepare:
+            self.prepare_hessian(project)
+        self.write("VIN", np.asarray(v, dtype=np.float64).reshape(self.n, 2))
+        forces.k_hessian_product(self.fb, self.ib, self.serial)
+        return self.node_vectors("VOUT")
+
+    def cable_state(self) -> dict[str, np.ndarray]:
+        """Per cable at the current x: length ``L`` (m), rest length ``a`` (m), strain
+        ``e``, tension ``tau`` (N), ``kc`` = dtau/dL (N/m), ``tau_ac`` = dtau/dac (N/m)."""
+        forces.k_update_cables(self.fb, self.ib, self.serial)
+        C = self.C
+        L, ac, tau, kc, tau_ac = self.read_many([("L", C), ("AC", C), ("TAU", C), ("KC", C), ("TAU_AC", C)])
+        a = self.cables.a0 - ac
+        return {"L": L, "a": a, "e": L / a - 1.0, "tau": tau, "kc": kc, "tau_ac": tau_ac}
+
+    def tensions(self) -> np.ndarray:
+        """Cable tensions tau (C,), N, at the current x."""
+        forces.k_update_cables(self.fb, self.ib, self.serial)
+        return self.read("TAU", self.C)
+
+    def tensions_at(self, ac: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Cable tensions tau (C,), N, at contractions ``ac`` (C,) m and positions ``x``
+        (n, 2) m, which become the model's state (no solve: ``x`` is an equilibrium
+        found before)."""
+        self.set_contraction(ac)
+        self.set_positions(x)
+        return self.tensions()
+
+    def length_jacobian_product(self, w: np.ndarray) -> np.ndarray:
+        """sum_c w_c dL_c/dx, (n, 2), for w (C,)."""
+        self.write("CCOEF", np.asarray(w, dtype=np.float64).reshape(self.C))
+        forces.k_cables_to_nodes(self.fb, self.ib, self.serial)
+        return self.node_vectors("VOUT")
+
+    def length_jacobian_transpose_product(self, v: np.ndarray) -> np.ndarray:
+        """dL_c/dx . v, (C,), for v (n, 2)."""
+        self.write("VIN", np.asarray(v, dtype=np.float64).reshape(self.n, 2))
+        forces.k_nodes_to_cables(self.fb, self.ib, self.serial)
+        return self.read("CW", self.C)
+
+    def mixed_product(self, w: np.ndarray) -> np.ndarray:
+        """(d2E/dx dac) w, (n, 2), for w (C,) in m."""
+        tau_ac = self.cable_state()["tau_ac"]
+        return self.length_jacobian_product(tau_ac * np.asarray(w, dtype=np.float64))
+
+    def mixed_transpose_product(self, v: np.ndarray) -> np.ndarray:
+        """(d2E/dx dac)^T v, (C,), for v (n, 2)."""
+        tau_ac = self.cable_state()["tau_ac"]
+        return tau_ac * self.length_jacobian_transpose_product(v)
+
+    # ------------------------------------------------------------ what the direct backend assembles
+    def hessian_entries(self) -> np.ndarray:
+        """Element and segment Hessian blocks as last prepared, (36 m + 144 S,):
+        see :func:`~tendon_taichi.physics.forces.k_hessian_entries`."""
+        out = np.empty(36 * self.m + 144 * self.S)
+        forces.k_hessian_entries(self.fb, self.ib, out, self.serial)
+        return out
+
+    def hessian_data(self) -> dict[str, np.ndarray]:
+        """What the direct backend assembles from (after prepare_hessian)."""
+        m, S, C = self.m, self.S, self.C
+        D, seg_n, seg_l, tau, kc = self.read_many([("D", 16 * m), ("SEG_N", 2 * S), ("SEG_L", S),
+                                                   ("TAU", C), ("KC", C)])
+        return {"D": D.reshape(m, 4, 4), "Bm": self.Bm, "vol": self.vol,
+                "seg_n": seg_n.reshape(S, 2), "seg_l": seg_l, "tau": tau, "kc": kc}

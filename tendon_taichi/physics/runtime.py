@@ -1,0 +1,156 @@
+"""The one place where Taichi is initialised.
+
+Importing this module neither imports Taichi nor calls ``ti.init``: the
+command line configures the runtime before it knows whether a command needs
+Taichi. ``ti`` (the ``taichi`` module, for the kernel modules) is imported on
+first use; :func:`init` starts Taichi, once per process, with f64 defaults.
+:func:`ensure_init` initialises lazily with the settings chosen by
+:func:`configure`, the environment variables ``TENDON_TAICHI_ARCH`` (``cpu``
+default, ``cuda``, ``vulkan``, ``gpu``...) and ``TENDON_TAICHI_THREADS``, or
+the defaults.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import sys
+import time
+
+from ..errors import InputError
+
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")  # before taichi is imported
+
+ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu")
+
+#: Models with at least this many elements + cable segments run their loops
+#: in parallel; smaller ones run them serialized, because a parallel loop
+#: costs a fixed ~0.1 ms to dispatch on the CPU backend (measured by bench).
+DEFAULT_PARALLEL_THRESHOLD = 20000
+
+#: BLAS threads (numpy, scipy): our vectors are short (<= ~1e5) and threaded
+#: OpenBLAS made a level-5 warm CG solve 3.5x slower (72 vs 250 ms, bench)
+DEFAULT_BLAS_THREADS = 1
+
+_settings = {
+    "arch": None,
+    "threads": None,
+    "parallel_threshold": None,
+}
+_state = {"initialized": False, "arch": None, "init_s": None}
+
+
+def configure(arch: str | None = None, threads: int | None = None,
+              parallel_threshold: int | None = None) -> None:
+    """Choose the backend before Taichi starts. Unset values keep defaults."""
+    if arch is not None:
+        if arch not in ARCHES:
+            raise InputError(f"unknown Taichi arch '{arch}' (choose from {', '.join(ARCHES)})")
+        if _state["initialized"] and arch != _state["arch"]:
+            raise InputError(f"Taichi already runs on '{_state['arch']}'; cannot switch to '{arch}'")
+        _settings["arch"] = arch
+    if threads is not None:
+        if threads < 1:
+            raise InputError(f"threads must be >= 1 (got {threads})")
+        _settings["threads"] = threads
+    if parallel_threshold is not None:
+        _settings["parallel_threshold"] = int(parallel_threshold)
+
+
+def _requested_arch() -> str:
+    arch = _settings["arch"] or os.environ.get("TENDON_TAICHI_ARCH", "cpu")
+    if arch not in ARCHES:
+        raise InputError(f"unknown Taichi arch '{arch}' (choose from {', '.join(ARCHES)})")
+    return arch
+
+
+def _requested_threads() -> int | None:
+    if _settings["threads"] is not None:
+        return _settings["threads"]
+    env = os.environ.get("TENDON_TAICHI_THREADS")
+    if env:
+        try:
+            return max(1, int(env))
+        except ValueError:
+            raise InputError(f"TENDON_TAICHI_THREADS must be an integer (got '{env}')") from None
+    return None
+
+
+def __getattr__(name: str):
+    if name == "ti":  # PEP 562: ``from .runtime import ti`` imports Taichi here, not before
+        import taichi
+        return taichi
+    raise AttributeError(f"module '{__name__}' has no attribute '{name}'")
+
+
+def init() -> str:
+    """Start Taichi (f64, CPU by default) once; return the arch it runs on."""
+    import taichi as ti
+
+    if _state["initialized"]:
+        return _state["arch"]
+    arch = _requested_arch()
+    kwargs = dict(arch=getattr(ti, arch), default_fp=ti.f64, default_ip=ti.i32,
+                  log_level=ti.WARN, offline_cache=True, random_seed=0)
+    threads = _requested_threads()
+    if threads is not None:
+        kwargs["cpu_max_num_threads"] = threads
+    t0 = time.perf_counter()
+    # ti.init prints "[Taichi] Starting on arch=..." on stdout; keep stdout for results.
+    with contextlib.redirect_stdout(io.StringIO()):
+        ti.init(**kwargs)
+    actual = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
+    actual = "cpu" if actual in ("x64", "arm64") else actual
+    if arch not in ("cpu", "gpu") and actual != arch:
+        print(f"tendon-taichi: warning: Taichi arch '{arch}' is not available, running on '{actual}'",
+              file=sys.stderr)
+    _state.update(initialized=True, arch=actual, init_s=time.perf_counter() - t0)
+    _limit_blas()
+    return actual
+
+
+def _limit_blas() -> None:
+    """Cap the BLAS thread pools (``TENDON_TAICHI_BLAS_THREADS``, default 1)."""
+    from threadpoolctl import threadpool_limits
+
+    env = os.environ.get("TENDON_TAICHI_BLAS_THREADS")
+    try:
+        n = max(1, int(env)) if env else DEFAULT_BLAS_THREADS
+    except ValueError:
+        raise InputError(f"TENDON_TAICHI_BLAS_THREADS must be an integer (got '{env}')") from None
+    threadpool_limits(limits=n, user_api="blas")
+    _state["blas_threads"] = n
+
+
+def ensure_init() -> str:
+    """Initialise Taichi if nobody has yet; return the arch."""
+    return init()
+
+
+def is_cpu() -> bool:
+    return ensure_init() == "cpu"
+
+
+def parallel_threshold() -> int:
+    if _settings["parallel_threshold"] is not None:
+        return _settings["parallel_threshold"]
+    env = os.environ.get("TENDON_TAICHI_PARALLEL_THRESHOLD")
+    return int(env) if env else DEFAULT_PARALLEL_THRESHOLD
+
+
+def info() -> dict:
+    """What the runtime runs on (for summaries and the benchmark)."""
+    import taichi as ti
+
+    return {
+        "arch": _state["arch"] if _state["initialized"] else _requested_arch(),
+        "threads": _requested_threads(),
+        "parallel_threshold": parallel_threshold(),
+        "taichi": ti.__version__ if hasattr(ti, "__version__") else None,
+        "init_s": _state["init_s"],
+        "blas_threads": _state.get("blas_threads"),
+    }
+
+
+__all__ = ["ti", "configure", "init", "ensure_init", "is_cpu", "parallel_threshold", "info"]

@@ -1,0 +1,88 @@
+"""The linear-backend protocol of the equilibrium and adjoint solves, and the
+backends' names.
+
+Newton and the adjoint need, from a backend, solves with the model's Hessian
+``H`` at its current state on the free DOFs. :class:`LinearSolver` is what
+every backend implements completely (:mod:`.cg`, :mod:`.direct`); the model
+is the operator, its state is passed in. The backends by name (:data:`SOLVERS`):
+
+* ``cg`` - PCG with the Hessian products in Taichi, preconditioned by a
+  reused factorization of the Hessian at a nearby state;
+* ``cg-jacobi`` - block-Jacobi PCG entirely in Taichi;
+* ``direct`` - the Hessian assembled into a scipy sparse matrix and
+  factorized with SuperLU;
+* ``auto`` - ``direct`` up to :data:`AUTO_DIRECT_MAX_DOFS` free DOFs, ``cg`` above.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Iterable, Iterator
+
+import numpy as np
+
+from ..errors import InputError
+
+#: every backend name a user may give (``--solver``, sweep files)
+SOLVERS = ("auto", "cg", "cg-jacobi", "direct")
+
+#: ``auto`` takes the direct backend up to this many free DOFs and the
+#: factorization-preconditioned CG above. Measured on the 2-core CPU machine
+#: (t_shape): inside the optimizer direct is 5-30 % faster at levels 1-3
+#: (714-2716 DOFs) and even at level 4 (5336); single warm-started equilibria are
+#: faster with CG from level 3 on (level 5, 10504 DOFs: 194 ms against 305 ms).
+AUTO_DIRECT_MAX_DOFS = 5000
+
+
+def resolve_solver(name: str, dofs: int) -> str:
+    """The backend that ``name`` stands for at this size (``auto`` picks by DOFs)."""
+    if name == "auto":
+        return "direct" if dofs <= AUTO_DIRECT_MAX_DOFS else "cg"
+    if name not in SOLVERS:
+        raise InputError(f"unknown solver '{name}' (choose from {', '.join(SOLVERS)})")
+    return name
+
+
+@dataclass
+class LinearStats:
+    """Counts: ``solves`` (factorizations or CG solves), ``iterations`` (CG),
+    ``reused`` (direct steps with an earlier factorization)."""
+
+    solves: int = 0
+    iterations: int = 0
+    reused: int = 0
+
+
+class LinearSolver(ABC):
+    """What Newton and the adjoint need from a linear backend (on ``self.model``)."""
+
+    name: str
+    stats: LinearStats
+
+    @abstractmethod
+    def newton_direction(self, eta: float, project: bool, fresh: bool = True) -> tuple[float, bool, int]:
+        """Solve H dx = -g (H exact or projected, at the model's x; g its last
+        gradient) to the relative residual ``eta``, into the model's Newton
+        direction; return (g . dx, met negative curvature, iterations).
+        ``fresh=False`` allows a backend to reuse the Hessian of a nearby state."""
+
+    @abstractmethod
+    def solve(self, rhs: np.ndarray, tol: float, warm: bool = False, prepare: bool = True) -> np.ndarray:
+        """y (n, 2) with H y = rhs on the free DOFs (exact H at x, zero on fixed DOFs),
+        to the relative residual ``tol``; ``warm`` starts from the last solution
+        (iterative backends); ``prepare=False`` reuses the Hessian as last prepared."""
+
+    @abstractmethod
+    def approx_solve(self, rhs: np.ndarray) -> np.ndarray | None:
+        """H0^-1 rhs (n, 2) with the factorization at hand (of a nearby state's
+        Hessian), or None when there is none: for first-order predictions."""
+
+    @abstractmethod
+    def solve_many(self, rhs: Iterable[np.ndarray], tol: float) -> Iterator[np.ndarray]:
+        """y (n, 2) with H y = b for each b (n, 2) of ``rhs``, H the Hessian at the
+        model's current state, prepared once."""
+
+    @abstractmethod
+    def reset(self) -> None:
+        """Forget reused state (a stage start must not depend on earlier stages)."""

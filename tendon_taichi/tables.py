@@ -1,0 +1,92 @@
+"""Typed access to one TOML table, with errors that name the key (scene and
+sweep files). Every problem raises :class:`~tendon_taichi.errors.SceneError`
+with one line: ``<origin>: <table>.<key> <what is wrong>``."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import SceneError
+
+
+class TableReader:
+    """Reads the keys of ``table`` (a dict from TOML) at ``where`` in ``origin``;
+    :meth:`finish` rejects the keys nobody read."""
+
+    def __init__(self, table: dict, where: str, origin: str):
+        if not isinstance(table, dict):
+            raise SceneError(f"{origin}: {where} must be a table")
+        self.table, self.where, self.origin = table, where, origin
+        self.used: set[str] = set()
+
+    def fail(self, key: str, msg: str):
+        raise SceneError(f"{self.origin}: {self.where}.{key} {msg}")
+
+    def has(self, key: str) -> bool:
+        return key in self.table
+
+    def raw(self, key: str):
+        self.used.add(key)
+        return self.table[key]
+
+    def number(self, key: str, default: float | None = None, *, gt=None, ge=None, lt=None,
+               le=None, required: bool = False) -> float | None:
+        if key not in self.table:
+            if required:
+                self.fail(key, "is required")
+            return default
+        v = self.raw(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            self.fail(key, f"must be a finite number (got {v!r})")
+        v = float(v)
+        for bound, ok, word in ((gt, lambda b: v > b, ">"), (ge, lambda b: v >= b, ">="),
+                                (lt, lambda b: v < b, "<"), (le, lambda b: v <= b, "<=")):
+            if bound is not None and not ok(bound):
+                self.fail(key, f"must be {word} {bound:g} (got {v:g})")
+        return v
+
+    def integer(self, key: str, default: int, *, ge: int) -> int:
+        if key not in self.table:
+            return default
+        v = self.raw(key)
+        if isinstance(v, bool) or not isinstance(v, int) or v < ge:
+            self.fail(key, f"must be an integer >= {ge} (got {v!r})")
+        return v
+
+    def choice(self, key: str, default: str, options: tuple[str, ...]) -> str:
+        if key not in self.table:
+            return default
+        v = self.raw(key)
+        if v not in options:
+            self.fail(key, f"must be one of {', '.join(repr(o) for o in options)} (got {v!r})")
+        return v
+
+    def point(self, key: str, default=None, required: bool = False) -> tuple[float, float] | None:
+        if key not in self.table:
+            if required:
+                self.fail(key, "is required")
+            return default
+        return as_point(self.raw(key), f"{self.origin}: {self.where}.{key}")
+
+    def polygon(self, value, name: str) -> np.ndarray:
+        where = f"{self.origin}: {self.where}.{name}"
+        if not isinstance(value, list) or len(value) < 3:
+            raise SceneError(f"{where} must be a list of at least 3 [x, y] points")
+        return np.array([as_point(p, where) for p in value], dtype=float)
+
+    def finish(self) -> None:
+        unknown = sorted(set(self.table) - self.used)
+        if unknown:
+            raise SceneError(f"{self.origin}: unknown key{'s' if len(unknown) > 1 else ''} "
+                             f"{', '.join(repr(k) for k in unknown)} in {self.where}")
+
+
+def as_point(v, where: str) -> tuple[float, float]:
+    """``[x, y]`` with two finite numbers as a tuple; SceneError naming ``where`` otherwise."""
+    if (not isinstance(v, list) or len(v) != 2
+            or any(isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c)
+                   for c in v)):
+        raise SceneError(f"{where} must be [x, y] with two finite numbers (got {v!r})")
+    return (float(v[0]), float(v[1]))

@@ -1,0 +1,176 @@
+"""The house: every import (function-local ones too) points down the layers, no
+module imports itself in a circle, the plugin protocol stays free of Taichi,
+no module grows past 600 lines, and the documents the code and docs cite exist."""
+
+import ast
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: the layers, bottom first; a module may import its own layer and the ones below
+LAYERS = [
+    ("tendon_taichi.version", "tendon_taichi.errors", "tendon_taichi.files", "tendon_taichi.tables",
+     "tendon_taichi._lazy"),
+    ("tendon_taichi.tasks",),
+    ("tendon_taichi.objective",),
+    ("tendon_taichi.body",),
+    ("tendon_taichi.io",),
+    ("tendon_taichi.physics",),
+    ("tendon_taichi.solve",),
+    ("tendon_taichi.optimizer",),
+    ("tendon_taichi.extract", "tendon_taichi.extraction", "extractors"),
+    ("tendon_taichi.apps",),
+    ("tendon_taichi.planted",),
+    ("tendon_taichi.cli", "tendon_taichi.__main__", "tendon_taichi"),
+]
+MAX_LINES = 600
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for pkg in ("tendon_taichi", "extractors"):
+        for f in (ROOT / pkg).rglob("*.py"):
+            parts = list(f.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join(parts)] = f
+    return out
+
+
+def _imports(name: str, path: Path, mods: dict[str, Path]) -> set[str]:
+    """The project modules that ``name`` imports anywhere in its code (``from P import
+    m`` of a submodule counts as importing ``P.m``; a package's ``__init__``
+    re-exporting its own modules does not count)."""
+    package = path.name == "__init__.py"
+    base = name.split(".") if package else name.split(".")[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            head = base[:len(base) - node.level + 1] if node.level else []
+            mod = ".".join(head + ([node.module] if node.module else []))
+            subs = [f"{mod}.{a.name}" for a in node.names if f"{mod}.{a.name}" in mods]
+            targets = subs if len(subs) == len(node.names) else [mod] + subs
+        else:
+            continue
+        for t in targets:
+            while t and t not in mods:
+                t = t.rpartition(".")[0]
+            if t and t != name and not (package and t.startswith(name + ".")):
+                found.add(t)
+    return found
+
+
+def _rank(module: str) -> int:
+    best, rank = -1, None
+    for r, layer in enumerate(LAYERS):
+        for prefix in layer:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best:
+                best, rank = len(prefix), r
+    assert rank is not None, f"{module} is in no layer"
+    return rank
+
+
+@pytest.fixture(scope="module")
+def graph():
+    mods = _modules()
+    return {m: _imports(m, f, mods) for m, f in mods.items()}
+
+
+def test_every_import_points_down(graph):
+    upward = [f"{a} -> {b}" for a, deps in graph.items() for b in deps if _rank(b) > _rank(a)]
+    assert not upward, upward
+
+
+def test_no_import_cycle(graph):
+    index, low, stack, on, cycles, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    assert not cycles, cycles
+
+
+def test_the_built_in_extractors_import_only_the_public_protocol(graph):
+    for m, deps in graph.items():
+        if m.startswith("extractors"):
+            assert deps <= {"tendon_taichi.extraction"}, (m, deps)
+
+
+def test_the_plugin_protocol_does_not_load_taichi():
+    code = "import sys, tendon_taichi.extraction, tendon_taichi.extract.protocol; assert 'taichi' not in sys.modules"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+
+
+def test_the_public_api_of_the_readme_imports(graph):
+    import tendon_taichi as tt
+    from tendon_taichi import sweep
+
+    for name in tt.__all__:
+        assert getattr(tt, name) is not None, name
+    assert callable(tt.optimize) and callable(tt.replay) and callable(sweep.run)
+
+
+def test_modules_are_short():
+    long = {m: n for m, f in _modules().items() if (n := len(f.read_text().splitlines())) > MAX_LINES}
+    assert not long, long
+
+
+def _tracked() -> list[str]:
+    return subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True).stdout.split()
+
+
+def test_cited_documents_exist():
+    """Every Markdown document or repository path that code or docs name exists."""
+    files = _tracked()
+    if not files:
+        pytest.skip("not a git checkout")
+    names, paths = {Path(f).name for f in files}, set(files)
+    missing = set()
+    for f in files:
+        if not f.endswith((".py", ".md", ".toml")):
+            continue
+        text = (ROOT / f).read_text(errors="replace")
+        missing |= {n for n in re.findall(r"\b([A-Za-z_][\w-]*\.md)\b", text) if n not in names}
+        for ref in re.findall(r"\b((?:docs|benchmarks|tests|tendon_taichi|extractors)/[\w./-]+\.(?:md|py|png|toml|json|csv))",
+                              text):
+            if ref not in paths:
+                missing.add(ref)
+    assert not missing, sorted(missing)
+
+
+def test_the_readme_is_short_and_points_into_docs():
+    readme = (ROOT / "README.md").read_text()
+    assert len(readme.splitlines()) <= 250
+    for doc in ("method", "cli", "scenes", "formats", "plugins"):
+        assert f"docs/{doc}.md" in readme, doc
+        assert (ROOT / "docs" / f"{doc}.md").is_file(), doc
