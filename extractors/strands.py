@@ -28,7 +28,7 @@ class StrandsExtractor(Extractor):
         tension_tol: float = 0.35   # largest |tau - strand mean| / strand mean
         bridge_gaps: bool = True    # continue across one slack fiber
         min_length: float = 0.01    # m
-        min_tension: float = 0.25   # drop paths weaker than this x the strongest one, shorter strands are dropped
+        min_tension: float = 0.25   # drop strands weaker than this x the strongest one
 
     def extract(self, problem, state: IdealizedState, options) -> list[Tendon]:
         view = FiberView(problem)

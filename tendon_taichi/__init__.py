@@ -1,14 +1,15 @@
 """tendon-taichi: design the tendon layout of a 2D soft robot.
 
 The package is layered, one folder per layer, each importing only the layers
-below it (``docs/architecture.md``): :mod:`.objective` (the objective's terms
-and settings), :mod:`.body` (scene files, meshes, the fiber lattice, cables,
-problems), :mod:`.io` (recordings, exports, pictures, progress),
-:mod:`.physics` (the Taichi model), :mod:`.solve` (Newton and the linear
-backends), :mod:`.optimizer` (soft IK and the homotopy), :mod:`.extract`
+below it (``docs/architecture.md``), bottom first: :mod:`.tasks` (cases as Dask
+tasks; it imports nothing of the application), :mod:`.objective` (the
+objective's terms and settings), :mod:`.body` (scene files, meshes, the fiber
+lattice, cables, problems), :mod:`.io` (recordings, exports, pictures,
+progress), :mod:`.physics` (the Taichi model), :mod:`.solve` (Newton and the
+linear backends), :mod:`.optimizer` (soft IK and the homotopy), :mod:`.extract`
 (the plugin protocol, metrics, the realizable robot, consolidation),
-:mod:`.tasks` (cases as Dask tasks), :mod:`.apps` (the commands' workflows),
-:mod:`.planted` (benchmarks with a known answer) and :mod:`.cli`.
+:mod:`.apps` (the commands' workflows), :mod:`.planted` (benchmarks with a
+known answer) and :mod:`.cli`.
 
 The names below are imported on first use (PEP 562): importing the package,
 or the plugin protocol :mod:`tendon_taichi.extraction`, does not start Taichi;

@@ -1,4 +1,4 @@
-"""User-facing errors (DESIGN.md section 7).
+"""User-facing errors (``docs/cli.md``, bad input).
 
 Every problem a user can cause (a malformed scene, a missing file, a solve
 that does not converge) raises a subclass of :class:`TendonError`; the CLI

@@ -125,8 +125,12 @@ def test_the_built_in_extractors_import_only_the_public_protocol(graph):
             assert deps <= {"tendon_taichi.extraction"}, (m, deps)
 
 
-def test_the_plugin_protocol_does_not_load_taichi():
-    code = "import sys, tendon_taichi.extraction, tendon_taichi.extract.protocol; assert 'taichi' not in sys.modules"
+@pytest.mark.parametrize("code", [
+    "import sys, tendon_taichi.extraction, tendon_taichi.extract.protocol; assert 'taichi' not in sys.modules",
+    # the package and the command line start Taichi only for a command that builds a model
+    "import sys, tendon_taichi, tendon_taichi.cli; tendon_taichi.cli.build_parser(); assert 'taichi' not in sys.modules",
+])
+def test_importing_does_not_load_taichi(code):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0, r.stderr
 

@@ -51,6 +51,26 @@ def test_bench_writes_its_outputs(tmp_path, cli):
     assert "optimize_s" not in res["levels"][1]["solvers"]["cg"]
     rows = list(csv.DictReader(open(out / "bench.csv")))
     assert len(rows) == 4 and {r["solver"] for r in rows} == {"cg", "direct"}
-    assert (out / "bench.png").stat().st_size > 10000
+    assert (out / "bench.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     for s in ("cg", "direct"):
         assert np.isfinite(res["exponents"][s]["equilibrium_cold_s"])
+    _check_figure(res)
+
+
+def _check_figure(res):
+    """The plot draws one time series per backend and timing that has figures, with its
+    exponent in the legend, and the quality of the one optimized level per extractor."""
+    from tendon_taichi.apps.bench import TIMINGS
+    from tendon_taichi.io.plots import bench_figure
+
+    fig = bench_figure(res, TIMINGS)
+    times, quality, tendons, realizable = fig.axes
+    expected = {f"{s}: {k[:-2]}" for lv in res["levels"] for s, f in lv["solvers"].items() for k in TIMINGS
+                if f.get(k)}
+    labels = [ln.get_label() for ln in times.get_lines()]
+    assert {lab.split(" (")[0] for lab in labels} == expected and len(labels) == len(expected)
+    assert all("~DOFs^" in lab for lab in labels if lab.startswith(("cg: equilibrium", "direct: equilibrium")))
+    cold = next(ln for ln in times.get_lines() if ln.get_label().startswith("cg: equilibrium_cold"))
+    assert list(cold.get_xdata()) == [lv["dofs"] for lv in res["levels"]]
+    names = set(res["levels"][0]["solvers"]["cg"]["extractors"])
+    assert {ln.get_label().split("/")[-1] for ln in tendons.get_lines()} == names

@@ -176,9 +176,8 @@ def test_refinement_lets_a_tendon_drop_that_a_neighbour_takes_over(planted, scre
     assert out.realizable.pose_error_rel <= 1e-4 < out.extracted_pose_error_rel
 
 
-@pytest.mark.xfail(strict=True, reason="known weakness (issue 6): only the reduction with the lowest unrefined "
-                   "error is refined; refining the best join too fixes this case but made extraction 1.2-1.6x "
-                   "slower for 1 more count-stable planted case (count_stability_probes.md, probe 6)")
+@pytest.mark.xfail(strict=True, reason="known weakness: only the reduction with the lowest unrefined error is "
+                   "refined, so a join that would refine to the exact layout loses to a drop that refines worse")
 def test_a_worse_join_is_refined_when_the_best_drop_cannot_be(planted):
     """The L-shaped planted tendon cut in two, its last two fibers also cut off:
     dropping the short piece loses less pose than joining the pieces (1.3 % of L

@@ -84,7 +84,7 @@ def test_warm_start_takes_fewer_newton_iterations(solver):
 
 @pytest.mark.parametrize("solver", ["cg", "cg-jacobi", "direct"])
 def test_newton_from_rest_iteration_count(solver):
-    """Exact Hessian first (DESIGN.md section 4): t_shape level 2, uniform 0.05."""
+    """Exact Hessian first (docs/method.md, numerics): t_shape level 2, uniform 0.05."""
     p = build_problem(load_scene("t_shape"), 2)
     m = Model.from_problem(p)
     eq = NewtonSolver(m, solver).solve(ac=0.05 * p.fibers.a0)
@@ -112,6 +112,7 @@ def test_preconditioners_agree_and_factor_needs_few_iterations():
     rng = np.random.default_rng(1)
     ac = rng.uniform(0.02, 0.08, p.fibers.n_fibers) * p.fibers.a0
     fac, jac = NewtonSolver(m, "cg"), NewtonSolver(m, "cg-jacobi")
+    assert (fac.linear.name, jac.linear.name) == ("cg", "cg-jacobi")  # what a recording keeps
     x_f = fac.solve(ac=ac, x0=p.mesh.nodes).x
     x_j = jac.solve(ac=ac, x0=p.mesh.nodes).x
     assert np.abs(x_f - x_j).max() <= 1e-8 * p.size

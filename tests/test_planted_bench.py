@@ -76,7 +76,14 @@ def test_planted_bench_command_on_one_case(tmp_path):
     assert case["length_ratio"] == pytest.approx(case["active_length"] / case["planted_length"])
     assert case["passed"] == (case["count"] <= 2 and case["realizable_pose_error_rel"] <= 0.01
                               and case["length_ratio"] <= 2.0)
-    assert Path(case["recording"]).exists() and (out / "gallery.png").stat().st_size > 0
+    assert Path(case["recording"]).exists() and (out / "gallery.png").read_bytes()[:4] == b"\x89PNG"
+    from tendon_taichi.planted.gallery import gallery_figure
+
+    panel = gallery_figure(res, {c.name: c for c in load_suite(SUITE)}).axes[0]
+    dashed = [ln for ln in panel.get_lines() if ln.get_linestyle() == "--"]
+    found = [ln for ln in panel.get_lines() if ln.get_linewidth() == 2.0]
+    assert len(dashed) == case["planted_count"] and len(found) == case["count"]
+    assert panel.get_title().startswith(f"{case['case']} ({'pass' if case['passed'] else 'miss'})")
     with open(out / "planted_bench.csv") as fh:
         rows = list(csv.reader(fh))
     assert tuple(rows[0]) == CSV_COLUMNS and len(rows) == 2

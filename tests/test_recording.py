@@ -50,6 +50,39 @@ def test_optimize_summary_follows_the_contract(reference):
     assert np.allclose(d["ac"], read_recording(path).stages[-1].ac, rtol=0, atol=0)
 
 
+def test_each_stage_keeps_its_equilibrium(reference):
+    """/stages/x holds each stage's equilibrium losslessly: the export's final state
+    bit for bit, and a state the extraction takes instead of solving again."""
+    from tendon_taichi.apps.extract import idealized_state
+
+    path, s = reference
+    run = read_recording(path)
+    problem = run.problem()
+    assert all(st.xs is not None and st.xs.shape == (1, problem.mesh.n_nodes, 2) for st in run.stages)
+    assert np.array_equal(run.stages[-1].xs[0], np.load(s["export"])["x"])
+    recorded = idealized_state(run, problem, 2, "auto")
+    run.stages[2].xs = None  # what a format-1 recording gives: solved again from rest
+    solved = idealized_state(run, problem, 2, "auto")
+    assert np.array_equal(recorded.x, solved.x) and np.array_equal(recorded.tau, solved.tau)
+
+
+def test_replay_notices_an_equilibrium_that_does_not_reproduce(reference, monkeypatch):
+    import tendon_taichi.apps.replay as rp
+
+    path, _ = reference
+    real = rp.read_recording
+
+    def shifted(p):
+        run = real(p)
+        run.stages[1].xs = run.stages[1].xs + 1e-6 * run.problem().size  # a recorded state moved by 1e-6 L
+        return run
+
+    monkeypatch.setattr(rp, "read_recording", shifted)
+    out = rp.replay(path)
+    assert [r["reproduces"] for r in out["stages"]] == [True, False, True, True, True] and not out["reproduces"]
+    assert out["stages"][1]["x_rel_diff"] == pytest.approx(1e-6, rel=1e-6)
+
+
 def test_replay_reproduces_every_stage(reference, cli):
     path, s = reference
     r = cli("replay", path, "--json")

@@ -143,7 +143,8 @@ def test_local_cluster_matches_one_by_one_and_reruns_reuse(sweep_file, in_proces
     header = (out / "sweep.csv").read_text().splitlines()[0].split(",")
     assert {"case", "settings.sparsity", "optimize.pose_error_rel", "extract.strands.count",
             "extract.path_cover.realizable_pose_error_rel", "time_s"} <= set(header)
-    assert (out / "sweep.png").stat().st_size > 10000
+    assert (out / "sweep.png").read_bytes()[:4] == b"\x89PNG"
+    _check_figure(result)
 
     again, _ = _sweep(sweep_file, out, "--workers", "2")
     assert all(r["reused"] for r in again["cases"]) and again["engine"]["kind"] == "none"
@@ -254,3 +255,18 @@ def test_a_failing_case_is_recorded_and_the_sweep_goes_on(tmp_path):
     again = json.loads(run_cli("sweep", tmp_path / "s.toml", "--out", out, "--workers", "0", "--json").stdout)
     assert [c["reused"] for c in again["cases"]] == [True, False]  # the failed one is tried again
     assert again["cases"][0]["optimize"] == good["optimize"]
+
+
+def _check_figure(result):
+    """The sweep's picture: a column per swept setting, a row per figure, and in the
+    tendon-count row one point per case for each scene and extractor."""
+    from tendon_taichi.io.plots import sweep_figure
+
+    fig = sweep_figure(result)
+    dims = [k for k, v in result["grid"].items() if len(set(v)) > 1] + (["level"] if len(result["levels"]) > 1 else [])
+    assert len(fig.axes) == 4 * len(dims)
+    counts = fig.axes[0].get_lines()  # the first row, first column: tendon counts
+    assert {ln.get_label() for ln in counts} == {f"{c['scene']} / {n}" for c in result["cases"]
+                                                for n in result["extractors"]}
+    points = sorted(y for ln in counts for y in ln.get_ydata())
+    assert points == sorted(c["extract"][n]["count"] for c in result["cases"] for n in result["extractors"])

@@ -10,13 +10,13 @@ import json
 import sys
 
 
-def main(paths):
-    runs = [json.load(open(p)) for p in paths]
+def table(runs: list[dict]) -> list[str]:
+    """The markdown table and its summary lines for planted-bench results ``runs``."""
     levels = [r["level"] for r in runs]
     by = [{c["case"]: c for c in r["cases"]} for r in runs]
     names = sorted(set.intersection(*(set(b) for b in by)))
-    print("| case | planted | " + " | ".join(f"level {lv}" for lv in levels) + " | same |")
-    print("|---|---|" + "---|" * len(levels) + "---|")
+    out = ["| case | planted | " + " | ".join(f"level {lv}" for lv in levels) + " | same |",
+           "|---|---|" + "---|" * len(levels) + "---|"]
     same = close = 0
     for n in names:
         cs = [b[n] for b in by]
@@ -26,12 +26,17 @@ def main(paths):
         same += ok
         close += near
         cells = [f"{c.get('count')}{'' if c.get('passed') else ' (miss)'}" for c in cs]
-        print(f"| {n} | {cs[0]['planted_count']} | " + " | ".join(cells) + f" | {'yes' if ok else 'no'} |")
-    print(f"\nsame count at every level: {same} of {len(names)}; within +-1: {close} of {len(names)}")
+        out.append(f"| {n} | {cs[0]['planted_count']} | " + " | ".join(cells) + f" | {'yes' if ok else 'no'} |")
+    out.append(f"\nsame count at every level: {same} of {len(names)}; within +-1: {close} of {len(names)}")
     for lv, r in zip(levels, runs):
         t = r["totals"]
-        print(f"level {lv}: passed {t['passed']} of {t['cases']}, count <= planted + 1 in "
-              f"{t['count_within_planted_plus_one']}, time {t['time_s']:.0f} s")
+        out.append(f"level {lv}: passed {t['passed']} of {t['cases']}, count <= planted + 1 in "
+                   f"{t['count_within_planted_plus_one']}, time {t['time_s']:.0f} s")
+    return out
+
+
+def main(paths):
+    print("\n".join(table([json.load(open(p)) for p in paths])))
 
 
 if __name__ == "__main__":

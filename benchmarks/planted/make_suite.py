@@ -1,10 +1,12 @@
 """Regenerate the planted-layout suite listed in suite.toml (beside this file).
 
-Usage: python benchmarks/planted/make_suite.py [--no-gallery]
+Usage: python benchmarks/planted/make_suite.py [--out DIR] [--only NAME ...] [--no-gallery]
 Writes, per case, <scene>_planted_<n>t_s<seed>[_<p>p].toml and .json (exactly
 what `tendon-taichi planted SCENE --tendons N --seed S --level L [--poses P]
 --out benchmarks/planted` writes), README.md (the table of cases and the
-commands) and gallery.png (every layout on its planted equilibrium, pose 0).
+commands) and gallery.png (every layout on its planted equilibrium, pose 0)
+into DIR (default: this folder). ``--only`` makes only the named cases (and
+no README). The README and the gallery record the commit that made them.
 """
 
 import argparse
@@ -14,6 +16,7 @@ from pathlib import Path
 from tendon_taichi import load_scene, parse_scene
 from tendon_taichi.planted.gallery import plot_layouts
 from tendon_taichi.planted.plant import plant, write_planted
+from tendon_taichi.version import provenance
 
 HERE = Path(__file__).resolve().parent
 
@@ -46,11 +49,15 @@ or one case:
 ```bash
 {commands}
 ```
+
+Made by `python benchmarks/planted/make_suite.py` at commit {commit}.
 """
 
 
 def main():
     ap = argparse.ArgumentParser()
+    ap.add_argument("--out", type=Path, default=HERE)
+    ap.add_argument("--only", nargs="+", metavar="NAME", help="make only these cases")
     ap.add_argument("--no-gallery", action="store_true")
     args = ap.parse_args()
     suite = tomllib.loads((HERE / "suite.toml").read_text())
@@ -59,8 +66,11 @@ def main():
     for case in suite["cases"]:
         scene = load_scene(case["scene"])
         poses = case.get("poses", 1)
+        name = f"{case['scene']}_planted_{case['tendons']}t_s{case['seed']}" + (f"_{poses}p" if poses > 1 else "")
+        if args.only and name not in args.only:
+            continue
         text, layout = plant(scene, case["tendons"], case["seed"], level, poses=poses)
-        toml_path, _ = write_planted(HERE, text, layout)
+        toml_path, _ = write_planted(args.out, text, layout)
         cases.append((parse_scene(text, origin=str(toml_path)), layout))
         rows.append(f"| {layout['name']} | {case['scene']} | {case['tendons']} | {poses} | {case['seed']} | "
                     f"{100 * layout['planted_length']:.1f} | "
@@ -69,10 +79,12 @@ def main():
                         f"--seed {case['seed']} --level {level}" + (f" --poses {poses}" if poses > 1 else "")
                         + " --out benchmarks/planted")
         print(rows[-1], flush=True)
-    (HERE / "README.md").write_text(README.format(level=level, rows="\n".join(rows),
-                                                  commands="\n".join(commands)))
+    if args.only:
+        return
+    (args.out / "README.md").write_text(README.format(level=level, rows="\n".join(rows), commands="\n".join(commands),
+                                                      commit=provenance()["commit"]))
     if not args.no_gallery:
-        plot_layouts(HERE / "gallery.png", cases, columns=5, dpi=80)
+        plot_layouts(args.out / "gallery.png", cases, columns=5, dpi=80)
 
 
 if __name__ == "__main__":

@@ -36,6 +36,7 @@ from ..physics import runtime
 from ..solve.linear import resolve_solver
 from ..solve.newton import NewtonSolver
 from ..tasks.engine import Task, case_id, run_tasks
+from ..version import provenance
 from .case import STOP, run_case, worker_setup
 
 #: seconds-valued figures, in the order of the table and the plot
@@ -195,7 +196,7 @@ def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int =
     solver; ``auto`` once per level, with the backend that ``--solver auto`` picks
     at that size (what a user gets by default), reported under that backend.
     The optimizations run after all other measurements, as tasks of
-    :func:`tendon_taichi.cluster.run_tasks` (``workers`` 0, the default: in this
+    :func:`tendon_taichi.tasks.engine.run_tasks` (``workers`` 0, the default: in this
     process, one after the other; else on a local or an existing Dask cluster)."""
     if len(scene.poses) > 1:
         raise InputError(f"bench measures one-pose scenes; '{scene.name}' has {len(scene.poses)} poses")
@@ -236,7 +237,7 @@ def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int =
     # each backend's first solve in the process included compiling its kernels
     comp = sum(f["first_solve_s"] - f["equilibrium_cold_s"]["median"] for f in rows[0]["solvers"].values())
     result = {"scene": scene.name, "machine": machine(), "compile_s": comp, "repeat": repeat, "levels": rows,
-              "exponents": exponents(rows), "optimize_engine": report.engine}
+              "exponents": exponents(rows), "optimize_engine": report.engine, "provenance": provenance()}
     write_outputs(result, out_dir)
     if report.interrupted:
         raise Stopped(f"interrupted during the optimizations; {len(report.outcomes)} of {len(jobs)} finished "

@@ -32,6 +32,7 @@ from ..io.plots import plot_sweep
 from ..io.progress import Progress
 from ..solve.linear import SOLVERS
 from ..tasks.engine import Task, case_id, run_tasks
+from ..version import provenance
 from .case import STOP, worker_setup
 from .case import run_case as run_one
 
@@ -212,7 +213,8 @@ def run(sweep: Sweep | str | Path, out_dir: str | Path, workers: int | None = No
               "scenes": [s.name for s in sw.scenes], "levels": list(sw.levels), "extractors": list(sw.extractors),
               "solver": sw.solver, "grid": sw.grid, "set": sw.fixed, "cases": rows,
               "failed": sum("error" in r for r in rows), "reused": sum(r["reused"] for r in rows),
-              "interrupted": report.interrupted, "engine": report.engine, "time_s": time.perf_counter() - t0}
+              "interrupted": report.interrupted, "engine": report.engine, "provenance": provenance(),
+              "time_s": time.perf_counter() - t0}
     write_outputs(result, out)
     if report.interrupted:
         raise SweepInterrupted(result, out)

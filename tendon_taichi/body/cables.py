@@ -1,4 +1,4 @@
-"""Cables: the contractile elements of both robots (DESIGN.md section 2).
+"""Cables: the contractile elements of both robots (``docs/method.md``).
 
 A cable is a polyline through points embedded in the rest mesh, with one rest
 length ``a0``, one contraction ``ac`` and one axial stiffness ``EA``; it slides

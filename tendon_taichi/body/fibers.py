@@ -1,4 +1,4 @@
-"""The idealized robot's fiber graph (DESIGN.md section 2).
+"""The idealized robot's fiber graph (``docs/method.md``, the model).
 
 Fiber nodes sit on a square lattice of spacing ``s`` centred on the body's
 bounding box; a fiber is a lattice edge to one of the 8 neighbours whose whole

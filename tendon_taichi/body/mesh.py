@@ -1,5 +1,5 @@
 """Triangle meshes of the body: meshing with ``triangle``, import with meshio,
-and barycentric embedding of material points (DESIGN.md section 2).
+and barycentric embedding of material points (``docs/method.md``).
 
 A :class:`Mesh` holds rest positions ``nodes`` (n, 2) in metres and
 counter-clockwise ``triangles`` (m, 3).

@@ -1,8 +1,8 @@
 """A problem: a scene at one resolution level, meshed, rigged and embedded.
 
-:func:`build_problem` turns a :class:`~tendon_taichi.scene.Scene` into the
+:func:`build_problem` turns a :class:`~tendon_taichi.body.scene.Scene` into the
 arrays every solver works on: the rest mesh, the clamped nodes, the fiber
-graph and the embedded target points (DESIGN.md sections 2 and 6).
+graph and the embedded target points (``docs/method.md``, ``docs/scenes.md``).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Scene files: the TOML format of DESIGN.md section 6, validated into typed objects.
+"""Scene files: the TOML format of ``docs/scenes.md``, validated into typed objects.
 
 Units are SI throughout (metres, pascals, newtons, kilograms). Every key is
 optional unless marked *required*; the defaults below are the documented ones.
@@ -56,7 +56,7 @@ class Material:
 
     @property
     def mu(self) -> float:
-        """First Lame parameter-like shear modulus E / (2 (1 + nu)), Pa."""
+        """The shear modulus (Lame's mu) E / (2 (1 + nu)), Pa."""
         return self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
 
     @property
@@ -79,7 +79,7 @@ class Body:
 
 @dataclass(frozen=True)
 class FiberSettings:
-    """The idealized robot's fiber lattice (DESIGN.md section 2)."""
+    """The idealized robot's fiber lattice (``docs/method.md``)."""
 
     spacing: float = 0.005
     stiffness: float = 50.0

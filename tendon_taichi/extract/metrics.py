@@ -22,7 +22,7 @@ class MetricSettings:
 
 def tendon_metrics(problem, state: IdealizedState, tendons: list[Tendon],
                    settings: MetricSettings | None = None) -> dict:
-    """The metrics of DESIGN.md section 5, the same for every extractor (SI units,
+    """The metrics of ``docs/method.md`` (extraction), the same for every extractor (SI units,
     angles in radians): ``count``, ``total_length``, ``lengths``, ``total_turning``
     (sum of |turn angles| over all tendons), ``max_turn``, ``kinks``, ``capstan``
     (exp(-mu Theta) per tendon) and ``capstan_worst``, ``tension_cv`` (the largest

@@ -1,4 +1,10 @@
-"""Pictures (matplotlib, headless): the tension pattern over the deformed body."""
+"""Pictures (matplotlib, headless): the tension pattern over the deformed body, an
+extraction's tendons on their realizable robot, the benchmark's and a sweep's
+figures, and the method in five panels.
+
+Each ``*_figure`` function builds a :class:`matplotlib.figure.Figure` (no
+pyplot state), so tests can check what it draws; each ``plot_*`` writes one
+atomically as a PNG."""
 
 from __future__ import annotations
 
@@ -8,6 +14,36 @@ import numpy as np
 
 from ..body.problem import Problem
 from ..files import atomic_path
+from ..version import provenance
+
+
+def png_metadata() -> dict[str, str]:
+    """What a PNG records of the code that drew it (its provenance)."""
+    p = provenance()
+    return {"Software": f"tendon-taichi {p['version']}",
+            "Comment": f"commit {p['commit'] or 'unknown'}{' (with uncommitted changes)' if p['dirty'] else ''}; "
+                       f"made by {p['made_by']}"}
+
+
+def save_png(fig, path: str | Path, dpi: int) -> Path:
+    """Write the figure ``fig`` to ``path`` as a PNG (with :func:`png_metadata`), atomically."""
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png", metadata=png_metadata())
+    return Path(path)
+
+
+def new_figure(**kwargs):
+    """A matplotlib Figure of its own (no pyplot state, headless)."""
+    from matplotlib.figure import Figure
+
+    return Figure(**kwargs)
+
+
+def palette() -> list[str]:
+    """matplotlib's default colour cycle."""
+    import matplotlib
+
+    return matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
 
 
 def _axes_tensions(ax, problem: Problem, x: np.ndarray, tau: np.ndarray, threshold: float,
@@ -37,46 +73,44 @@ def _axes_tensions(ax, problem: Problem, x: np.ndarray, tau: np.ndarray, thresho
     return lc
 
 
-def plot_stages(path: str | Path, problem: Problem, panels: list[tuple],
-                threshold: float, scale: float) -> Path:
-    """A PNG with one panel per (title, x, tau[, pose]): fibers coloured by tension
-    (N) over the deformed mesh (grey: rest), the targets of ``pose`` (default 0)
-    (blue) and their goals (green)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def plot_stages(path: str | Path, problem: Problem, panels: list[tuple], threshold: float, scale: float) -> Path:
+    """:func:`stages_figure` as a PNG."""
+    return save_png(stages_figure(problem, panels, threshold, scale), path, 130)
 
 
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.0), squeeze=False)
+def stages_figure(problem: Problem, panels: list[tuple], threshold: float, scale: float):
+    """One panel per (title, x, tau[, pose]): fibers coloured by tension (N) over the
+    deformed mesh (grey: rest), the targets of ``pose`` (default 0) (blue) and their
+    goals (green); fibers at most ``threshold`` (N) are slack."""
+    fig = new_figure(figsize=(4.2 * len(panels), 4.0))
+    axes = fig.subplots(1, len(panels), squeeze=False)
     lc = None
     for ax, (title, x, tau, *pose) in zip(axes[0], panels):
         lc = _axes_tensions(ax, problem.pose(pose[0] if pose else 0), x, tau, threshold, scale, title)
     axes[0][0].legend(loc="lower left", fontsize=7)
     if lc is not None:
         fig.colorbar(lc, ax=list(axes[0]), shrink=0.8, label="fiber tension (N)")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130, format="png")
-    plt.close(fig)
-    return Path(path)
+    return fig
 
 
 def plot_compare(path: str | Path, extraction) -> Path:
+    """:func:`compare_figure` as a PNG."""
+    return save_png(compare_figure(extraction), path, 130)
+
+
+def compare_figure(extraction):
     """The idealized tension pattern beside each extractor's tendons drawn on its
     realizable robot's equilibrium (targets blue, goals green)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-
     p, st = extraction.problem, extraction.state
     ok = [r for r in extraction.results if r.error is None]
-    fig, axes = plt.subplots(1, 1 + len(ok), figsize=(4.2 * (1 + len(ok)), 4.0), squeeze=False)
+    fig = new_figure(figsize=(4.2 * (1 + len(ok)), 4.0))
+    axes = fig.subplots(1, 1 + len(ok), squeeze=False)
     scale = max(float(st.tau.max()), 1e-9)
     lc = _axes_tensions(axes[0][0], p, st.x, st.tau, st.active_threshold, scale / 2.0,
                         f"idealized (stage {extraction.stage}): {int(st.active.sum())} active, "
                         f"{100 * extraction.idealized_pose_error / p.size:.2f}% pose")
     T = p.mesh.triangles
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    colors = palette()
     for ax, r in zip(axes[0][1:], ok):
         x = r.realizable.x
         ax.triplot(p.mesh.nodes[:, 0], p.mesh.nodes[:, 1], T, color="0.88", lw=0.4)
@@ -98,10 +132,7 @@ def plot_compare(path: str | Path, extraction) -> Path:
         ax.set_xticks([])
         ax.set_yticks([])
     fig.colorbar(lc, ax=axes[0][0], shrink=0.7, label="fiber tension (N)")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130, format="png")
-    plt.close(fig)
-    return Path(path)
+    return fig
 
 
 def _quality_series(rows: list[dict]) -> dict[str, list[dict]]:
@@ -116,17 +147,17 @@ def _quality_series(rows: list[dict]) -> dict[str, list[dict]]:
 
 
 def plot_bench(path: str | Path, result: dict, timings: tuple[str, ...]) -> Path:
+    """:func:`bench_figure` as a PNG."""
+    return save_png(bench_figure(result, timings), path, 120)
+
+
+def bench_figure(result: dict, timings: tuple[str, ...]):
     """Left: time against DOFs (log-log) per operation and solver, with the fitted
     exponent in the legend. Right, against the level: active length and
     idealized pose error; tendon count per extractor; realizable pose error per
     extractor. ``timings``: the figures (keys ending in ``_s``) to draw, in order."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-
     rows = result["levels"]
-    fig = plt.figure(figsize=(14, 6))
+    fig = new_figure(figsize=(14, 6))
     grid = fig.add_gridspec(3, 2, width_ratios=(1.35, 1))
     ax = fig.add_subplot(grid[:, 0])
     qa, qt, qr = (fig.add_subplot(grid[i, 1]) for i in range(3))
@@ -174,10 +205,7 @@ def plot_bench(path: str | Path, result: dict, timings: tuple[str, ...]) -> Path
     if not series:
         qa.text(0.5, 0.5, "no optimization run (--no-optimize)", ha="center", transform=qa.transAxes)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
-    return Path(path)
+    return fig
 
 
 def _swept(result: dict) -> list[tuple[str, list]]:
@@ -191,19 +219,19 @@ def _swept(result: dict) -> list[tuple[str, list]]:
 
 
 def plot_sweep(path: str | Path, result: dict) -> Path:
+    """:func:`sweep_figure` as a PNG."""
+    return save_png(sweep_figure(result), path, 110)
+
+
+def sweep_figure(result: dict):
     """A grid of panels: rows are tendon count, realizable pose error, active length
     and time; columns are the swept settings (values as evenly spaced ticks).
     Colour: scene; marker: extractor."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-
     cases = [c for c in result["cases"] if "error" not in c]
     dims = _swept(result)
     names = result["extractors"]
     scenes = list(dict.fromkeys(c["scene"] for c in cases))
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    colors = palette()
     markers = "os^vD*P"
     rows = [("tendons", lambda c, n: c["extract"].get(n, {}).get("count")),
             ("realizable pose error (% of L)",
@@ -211,8 +239,8 @@ def plot_sweep(path: str | Path, result: dict) -> Path:
              else None),
             ("active length (cm)", lambda c, n: 100 * c["optimize"]["active_length"]),
             ("time (s)", lambda c, n: c["time_s"])]
-    fig, axes = plt.subplots(len(rows), len(dims), figsize=(max(7.5, 4.2 * len(dims)), 2.4 * len(rows)),
-                             squeeze=False)
+    fig = new_figure(figsize=(max(7.5, 4.2 * len(dims)), 2.4 * len(rows)))
+    axes = fig.subplots(len(rows), len(dims), squeeze=False)
     for j, (key, values) in enumerate(dims):
         for i, (ylabel, get) in enumerate(rows):
             ax = axes[i, j]
@@ -248,27 +276,26 @@ def plot_sweep(path: str | Path, result: dict) -> Path:
         fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7)
     fig.suptitle(f"sweep '{result['name']}': {len(cases)} cases (colour: scene; marker: extractor)", fontsize=10)
     fig.tight_layout(rect=(0, 0.02 + 0.02 * ((len(labels) + 2) // 3), 1, 0.97))
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return Path(path)
+    return fig
 
 
 def plot_story(path: str | Path, problem: Problem, planted: dict | None, stage0, final, extractor,
                threshold: float, scale: float) -> Path:
+    """:func:`story_figure` as a PNG."""
+    return save_png(story_figure(problem, planted, stage0, final, extractor, threshold, scale), path, 110)
+
+
+def story_figure(problem: Problem, planted: dict | None, stage0, final, extractor, threshold: float,
+                 scale: float):
     """The method in five panels, for a README: the planted tendons on their
     equilibrium (``planted``: a layout dict of :mod:`~tendon_taichi.planted`, or
     None), stage 0 (unregularized soft IK) and the final stage (``(x, tau,
     figures)`` each) as fiber tensions, one extractor's tendons at rest, and its
     realizable robot (``extractor``: a :class:`~tendon_taichi.tendons.ExtractorResult`)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-
-    fig, axes = plt.subplots(1, 5, figsize=(19, 4.0))
+    fig = new_figure(figsize=(19, 4.0))
+    axes = fig.subplots(1, 5)
     T, X = problem.mesh.triangles, problem.mesh.nodes
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    colors = palette()
     pose = problem.pose(0)
 
     def frame(ax, x, title):
@@ -315,7 +342,4 @@ def plot_story(path: str | Path, problem: Problem, planted: dict | None, stage0,
     for i, t in enumerate(extractor.tendons):
         ax.plot(c[t.nodes][:, 0], c[t.nodes][:, 1], color=colors[i % len(colors)], lw=2.2)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return Path(path)
+    return fig

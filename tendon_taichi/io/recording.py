@@ -11,8 +11,8 @@ iteration counted over the whole run):
 * per logged iteration: ``/world/mesh`` (deformed edges), ``/world/fibers``
   (coloured by tension on a fixed scale, slack fibers faint), ``/world/targets``,
   ``/world/goals`` (with several poses: the same under ``/world/poses/<name>/``),
-  and scalars ``/metrics/objective/<term>``, ``/metrics/pose_error_rel``,
-  ``/metrics/active_fibers``, ``/metrics/k``;
+  and scalars ``/metrics/objective/<term>``, ``/metrics/figures/pose_error_rel``,
+  ``/metrics/figures/active_fibers``, ``/metrics/figures/k``;
 * per completed stage (then flushed to disk): ``/stages/ac``, ``/stages/r``
   (the poses' vectors one after the other, (P f,)), ``/stages/tau`` (the union
   tension, (f,)), ``/stages/x`` (each pose's equilibrium, (P, n, 2); f64

@@ -28,8 +28,8 @@ GENERAL = (
     *HOMOTOPY,
     Setting("active_threshold", 0.01, "a fiber is active if tau > this x tau_ref", gt=0.0),
     Setting("stage_iterations", 500, "L-BFGS-B iteration cap per stage", kind=int, ge=1),
-    Setting("settle_tol", 1.0e-4, "a stage ends when the objective fell by less than this x its start value "
-            "over the settle window", ge=0.0),
+    Setting("settle_tol", 1.0e-4, "a stage ends when, over the settle window, the objective fell by less than "
+            "this x its value after the stage's first iteration", ge=0.0),
     Setting("settle_window", 25, "iterations over which a stage must have settled", kind=int, ge=1),
 )
 

@@ -2,7 +2,8 @@
 
 Stage 0 is the paper's plain soft IK (the terms that are on in every stage:
 pose and the small contraction regularizer); stage s >= 1 turns every term on,
-the sparsity and strand-end terms at ``k = k0 factor^(s-1)``, and re-optimizes
+those that read ``k`` (sparsity; strand ends with the ``count`` measure) at
+``k = k0 factor^(s-1)``, and re-optimizes
 from the previous stage's ``r``. The schedule stops when the active set has
 not changed over two stages or ``k < k_min``. Every stage starts from the
 equilibrium solved from rest, so a stage depends only on its starting ``r``:

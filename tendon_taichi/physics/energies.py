@@ -1,4 +1,5 @@
-"""Energy densities of DESIGN.md section 2 as Taichi functions (private to the model).
+"""The energy densities of the body and the fibers (``docs/method.md``) as Taichi
+functions, for :mod:`.forces`.
 
 Neo-Hookean (compressible), per unit reference volume, with F the 2x2
 deformation gradient and J = det F::

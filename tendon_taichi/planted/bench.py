@@ -37,6 +37,7 @@ from ..extract.plugins import available_extractors
 from ..files import atomic_path, write_json
 from ..io.progress import Progress
 from ..tasks.engine import Task, case_id, run_tasks
+from ..version import provenance
 from .gallery import plot_gallery
 
 #: pass criteria (the issue's "how it is shown")
@@ -224,7 +225,7 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
              for case in suite]
     by_name = {c.name: c for c in suite}
     result = {"suite": str(directory), "level": level, "settings": overrides, "consolidation": cons,
-              "cases": []}
+              "provenance": provenance(), "cases": []}
     done = {}
 
     def on_outcome(o) -> None:

@@ -1,4 +1,5 @@
-"""Pictures of planted layouts: every case on its planted equilibrium."""
+"""Pictures of planted layouts: every layout of a suite on its planted
+equilibrium, and a planted-bench run's gallery (planted against found)."""
 
 from __future__ import annotations
 
@@ -7,23 +8,39 @@ from pathlib import Path
 
 import numpy as np
 
+from ..body.problem import build_problem
 from ..body.scene import load_scene
 from ..files import atomic_path
+from ..io.plots import new_figure, palette, png_metadata, save_png
+from .plant import solve_tendons
+from .walk import PlantedTendon
 
 
-def plot_layouts(path, cases: list[tuple[Scene, dict]], columns: int = 4, dpi: int = 72):
-    """A PNG gallery, one panel per (planted scene, layout): the rest outline (grey),
-    the planted equilibrium's outline (black), the tendons on it (colours; dot: anchor,
-    thin: at rest), the target points at rest (blue) and their goals (green x)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    from PIL import Image
-    import matplotlib.pyplot as plt
+def plot_layouts(path, cases: list[tuple], columns: int = 4, dpi: int = 72) -> Path:
+    """:func:`layouts_figure` as a PNG with a 64-colour palette (a small file)."""
+    from PIL import Image, PngImagePlugin
+
+    buf = io.BytesIO()
+    layouts_figure(cases, columns).savefig(buf, dpi=dpi, format="png")
+    buf.seek(0)
+    info = PngImagePlugin.PngInfo()
+    for key, value in png_metadata().items():
+        info.add_text(key, value)
+    with Image.open(buf) as im, atomic_path(path) as tmp:
+        im.convert("RGB").quantize(64).save(tmp, format="png", optimize=True, pnginfo=info)
+    return Path(path)
+
+
+def layouts_figure(cases: list[tuple], columns: int = 4):
+    """One panel per (planted scene, layout): the rest outline (grey), the planted
+    equilibrium's outline (black), the tendons on it (colours; dot: anchor, thin: at
+    rest), the target points at rest (blue) and their goals (green x)."""
     from matplotlib.collections import LineCollection
 
     rows = -(-len(cases) // columns)
-    fig, axes = plt.subplots(rows, columns, figsize=(2.6 * columns, 2.6 * rows), squeeze=False)
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig = new_figure(figsize=(2.6 * columns, 2.6 * rows))
+    axes = fig.subplots(rows, columns, squeeze=False)
+    colors = palette()
     for ax in axes.ravel():
         ax.axis("off")
     for ax, (scene, layout) in zip(axes.ravel(), cases):
@@ -49,28 +66,24 @@ def plot_layouts(path, cases: list[tuple[Scene, dict]], columns: int = 4, dpi: i
         ax.set_title(f"{layout['name']}\n{100 * layout['planted_length']:.1f} cm, max disp. "
                      f"{100 * layout['pose']['max_target_displacement_rel']:.1f} % L", fontsize=7)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, dpi=dpi, format="png")
-    plt.close(fig)
-    buf.seek(0)
-    with Image.open(buf) as im, atomic_path(path) as tmp:  # a 64-colour palette: a small file
-        im.convert("RGB").quantize(64).save(tmp, format="png", optimize=True)
-    return Path(path)
+    return fig
 
 
-def plot_gallery(path: Path, result: dict, suite: dict[str, Case]) -> Path:
-    """One panel per case: the body, the planted tendons (dashed black) and the best
-    extractor's tendons (colours), in rest coordinates."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def plot_gallery(path: Path, result: dict, suite: dict) -> Path:
+    """:func:`gallery_figure` as a PNG."""
+    return save_png(gallery_figure(result, suite), path, 110)
 
 
+def gallery_figure(result: dict, suite: dict):
+    """One panel per case of a planted-bench ``result``: the body, the planted
+    tendons (dashed black) and the best extractor's tendons (colours), in rest
+    coordinates; ``suite`` maps case names to their cases."""
     cases = result["cases"]
     cols = min(4, max(1, len(cases)))
     rows = (len(cases) + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.3 * rows), squeeze=False)
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig = new_figure(figsize=(3.6 * cols, 3.3 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
+    colors = palette()
     for ax in axes.ravel():
         ax.set_axis_off()
     for ax, c in zip(axes.ravel(), cases):
@@ -96,7 +109,4 @@ def plot_gallery(path: Path, result: dict, suite: dict[str, Case]) -> Path:
         ax.set_aspect("equal")
     fig.suptitle("planted (dashed) vs found (colour)", fontsize=10)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return path
+    return fig

@@ -2,7 +2,7 @@
 
 :func:`plant` draws a few random but plausible tendons in a scene's body,
 contracts them, solves the body with only those tendons as sliding cables
-(the realizable robot of DESIGN.md section 2) and writes where the scene's
+(the realizable robot of ``docs/method.md``) and writes where the scene's
 target points went as their goals. The result is a benchmark with a known
 answer: an optimizer and its extractors should find tendons like the planted
 ones, and a realizable pose error near zero is attainable.

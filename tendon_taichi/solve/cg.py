@@ -156,12 +156,12 @@ class CGSolver(LinearSolver):
     factorization (``factor``, default) or by 2x2 block Jacobi inside one fused
     Taichi kernel per iteration (``jacobi``)."""
 
-    name = "cg"
-
     def __init__(self, model: Model, max_iter: int | None = None, preconditioner: str = "factor"):
         if preconditioner not in PRECONDITIONERS:
             raise InputError(f"unknown preconditioner '{preconditioner}' (choose from "
                              f"{', '.join(PRECONDITIONERS)})")
+        #: the backend's name in SOLVERS (what a recording keeps, so replay takes the same one)
+        self.name = "cg" if preconditioner == "factor" else "cg-jacobi"
         self.model = model
         self.preconditioner = preconditioner
         self.pre = FactorPreconditioner(model) if preconditioner == "factor" else None

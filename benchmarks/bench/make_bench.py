@@ -1,0 +1,103 @@
+"""Regenerate the checked-in benchmark results: this folder's bench.json, bench.csv,
+bench.png and table.txt, and the performance page docs/performance.md.
+
+Usage: python benchmarks/bench/make_bench.py [--levels 1 2 3 4 5] [--repeat 3] [--out DIR]
+       [--page FILE] [--no-optimize]
+
+Runs the resolution-scaling benchmark on t_shape with both linear backends and
+the whole optimization with the backend ``--solver auto`` picks at each level
+(``tendon-taichi bench t_shape --levels ... --solver cg direct --repeat N
+--optimize-solver auto --out DIR``), then writes DIR/table.txt and the page
+(the table, the fitted exponents, the plot, the optimization's quality per
+level, the machine and the commit that made it). Defaults: levels 1-5, 3
+repeats, this folder and docs/performance.md; the full run takes about half an
+hour on 2 cores.
+"""
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from tendon_taichi import load_scene
+from tendon_taichi.apps.bench import run_bench, table
+
+HERE = Path(__file__).resolve().parent
+PAGE = HERE.parent.parent / "docs" / "performance.md"
+
+INTRO = """# Performance
+
+How cost and quality scale with the mesh resolution on the built-in `t_shape`,
+measured by `tendon-taichi bench` (see `docs/cli.md`). This page and the files
+in `benchmarks/bench/` are written by `python benchmarks/bench/make_bench.py`;
+do not edit them by hand.
+
+Per level and linear backend, in seconds (medians of the repeats, compiling the
+Taichi kernels excluded): `eq cold`, one equilibrium from rest; `eq warm`, one
+from the equilibrium of a design whose contraction ratios differ by +-0.5 %;
+`Newton` and `CG it`, iterations cold/warm; `adjoint`, one adjoint solve;
+`gradient`, one warm equilibrium plus the adjoint; `forward`, the same gradient
+by one solve per fiber (where that finishes in reasonable time); `optimize`, the
+whole regularized optimization with the backend `--solver auto` picks at that
+size; `mem MB`, the process's peak resident memory. Exponents are least-squares
+slopes of log(time) against log(DOFs) over the levels from the second on.
+"""
+
+
+def quality_table(result: dict) -> list[str]:
+    """Per level: the whole optimization and each extractor's tendons (count /
+    realizable pose error in % of L / kinks)."""
+    names = sorted({n for lv in result["levels"] for f in lv["solvers"].values() for n in f.get("extractors", {})})
+    rows = ["| level | optimize | pose error | active length | " + " | ".join(names) + " |",
+            "|---|---|---|---|" + "---|" * len(names)]
+    for lv in result["levels"]:
+        for solver, f in lv["solvers"].items():
+            if "optimize_s" not in f:
+                continue
+            cells = []
+            for n in names:
+                e = f["extractors"].get(n, {})
+                cells.append("failed" if "error" in e else
+                             f"{e['tendons']} / {100 * e['realizable_pose_error_rel']:.2f} / {e['kinks']}")
+            rows.append(f"| {lv['level']} | {f['optimize_s']['median']:.1f} s ({solver}) | "
+                        f"{100 * f['pose_error_rel']:.2f} % | {100 * f['active_length']:.1f} cm | "
+                        + " | ".join(cells) + " |")
+    return rows
+
+
+def page(result: dict, lines: list[str], plot: str) -> str:
+    m, p = result["machine"], result["provenance"]
+    exps = [f"exponents {s}: " + ", ".join(f"{k[:-2]} {v:.2f}" for k, v in d.items())
+            for s, d in sorted(result["exponents"].items())]
+    return "\n".join([
+        INTRO,
+        f"Measured on {m['cores']} cores ({m['cpu']}, Taichi {m['arch']}, Python {m['python']}), "
+        f"{result['repeat']} repeat(s), at commit `{p['commit']}`{' (with uncommitted changes)' if p['dirty'] else ''} "
+        f"on {p['date']}, by `{p['made_by']}`.",
+        "", "```text", *lines, *exps, f"compile {result['compile_s']:.1f} s", "```", "",
+        f"![bench]({plot})", "",
+        "The whole optimization per level (extractor columns: tendons / realizable pose error in % of L / kinks):",
+        "", *quality_table(result), ""])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--out", type=Path, default=HERE)
+    ap.add_argument("--page", type=Path, default=PAGE)
+    ap.add_argument("--no-optimize", action="store_true")
+    args = ap.parse_args(argv)
+    result = run_bench(load_scene("t_shape"), args.levels, ["cg", "direct"], args.repeat, args.out,
+                       [] if args.no_optimize else None, optimize_solver="auto")
+    lines = table(result)
+    (args.out / "table.txt").write_text("\n".join(lines) + "\n")
+    plot = os.path.relpath(args.out / "bench.png", args.page.parent)
+    args.page.parent.mkdir(parents=True, exist_ok=True)
+    args.page.write_text(page(result, lines, plot))
+    print(f"wrote {args.out}/ (bench.json, bench.csv, bench.png, table.txt) and {args.page}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

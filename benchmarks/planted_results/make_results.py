@@ -1,0 +1,127 @@
+"""Regenerate the checked-in planted-suite results in this folder.
+
+Usage: python benchmarks/planted_results/make_results.py [--levels 1 2 3] [--out DIR] [--runs DIR]
+       [--workers N] [--cases NAME ...] [--set KEY=VALUE ...]
+
+For each level, runs `tendon-taichi planted-bench benchmarks/planted --resolution
+LEVEL --out RUNS/rLEVEL` (default settings, or the [optimize] settings given by
+--set; finished cases in RUNS are reused), then writes into DIR (default: this
+folder) planted_bench_level<LEVEL>.csv, gallery_level2.png (when level 2 is run),
+counts_by_level.md (benchmarks/planted/counts_by_level.py's table) and
+README.md, the results page: per level the suite's figures, per case its
+figures at every level, and the commit that made them. The default run (levels
+1-3, 16 cases) takes about an hour and a half on 2 cores.
+"""
+
+import argparse
+import shutil
+import statistics
+import sys
+import tomllib
+from pathlib import Path
+
+from tendon_taichi.planted.bench import run_suite
+from tendon_taichi.version import provenance
+
+HERE = Path(__file__).resolve().parent
+SUITE = HERE.parent / "planted"
+sys.path.insert(0, str(SUITE))
+import counts_by_level  # noqa: E402  (a script beside the suite)
+
+INTRO = """# Planted-suite results
+
+`tendon-taichi planted-bench` (see `docs/cli.md`) on the suite in
+`benchmarks/planted` with the default settings, consolidation included, at
+each resolution level. Everything in this folder is written by
+`python benchmarks/planted_results/make_results.py`; do not edit it by hand.
+A case passes when its best extractor (the lowest realizable pose error among
+those finding at most planted + 1 tendons) finds at most planted + 1 tendons,
+its realizable robot reaches the goals within 1 % of L and the active length is
+at most twice the planted one. Per case: `planted_bench_level<N>.csv`; the
+level-2 gallery: `gallery_level2.png` (planted tendons dashed, found ones in
+colour); the count at every level: `counts_by_level.md`.
+"""
+
+
+def _median(cases, key):
+    vals = [c[key] for c in cases if c.get(key) is not None]
+    return statistics.median(vals) if vals else float("nan")
+
+
+def summary(runs: list[dict]) -> list[str]:
+    rows = ["| level | passed | count = planted | count <= planted + 1 | median active / planted length | "
+            "median realizable pose error | suite time |", "|---|---|---|---|---|---|---|"]
+    for r in runs:
+        done = [c for c in r["cases"] if "error" not in c]
+        t = r["totals"]
+        rows.append(f"| {r['level']} | {t['passed']} of {t['cases']} | "
+                    f"{sum(c['count'] == c['planted_count'] for c in done)} | {t['count_within_planted_plus_one']} | "
+                    f"{_median(done, 'length_ratio'):.2f} | {100 * _median(done, 'realizable_pose_error_rel'):.2f} % | "
+                    f"{t['time_s']:.0f} s |")
+    return rows
+
+
+def per_case(runs: list[dict]) -> list[str]:
+    """Per case and level: tendons found / planted (best extractor), realizable pose error, kinks, capstan, pass."""
+    levels = [r["level"] for r in runs]
+    by = [{c["case"]: c for c in r["cases"]} for r in runs]
+    rows = ["| case | " + " | ".join(f"level {lv}" for lv in levels) + " |", "|---|" + "---|" * len(levels)]
+    for name in sorted(set().union(*by)):
+        cells = []
+        for b in by:
+            c = b.get(name)
+            if c is None or "error" in c:
+                cells.append("-" if c is None else "failed")
+                continue
+            cells.append(f"{c['count']}/{c['planted_count']} {c['best']}, {100 * c['realizable_pose_error_rel']:.2f} %, "
+                         f"{c['kinks']} kinks, capstan {c['capstan_worst']:.2f}{'' if c['passed'] else ' **miss**'}")
+        rows.append(f"| {name} | " + " | ".join(cells) + " |")
+    return rows
+
+
+def page(runs: list[dict]) -> str:
+    p = runs[0].get("provenance") or provenance()
+    settings = runs[0]["settings"] or "the defaults"
+    return "\n".join([
+        INTRO,
+        f"Made at commit `{p['commit']}`{' (with uncommitted changes)' if p['dirty'] else ''} on {p['date']}, "
+        f"settings: {settings}, consolidation: {runs[0]['consolidation']}.", "",
+        *summary(runs), "", "## Per case", "",
+        "Tendons found / planted (best extractor), realizable pose error (% of L), kinks, worst capstan factor.", "",
+        *per_case(runs), "", "## The count across levels", "", *counts_by_level.table(runs), ""])
+
+
+def _setting(item: str):
+    key, _, value = item.partition("=")
+    try:
+        return key, tomllib.loads(f"v = {value}")["v"]
+    except tomllib.TOMLDecodeError:
+        raise SystemExit(f"--set {item}: the value must be a TOML value")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3])
+    ap.add_argument("--out", type=Path, default=HERE)
+    ap.add_argument("--runs", type=Path, default=Path("recordings/planted_results"))
+    ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--cases", nargs="+")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="an [optimize] setting")
+    args = ap.parse_args(argv)
+    overrides = dict(_setting(s) for s in args.set)
+    runs = []
+    for level in args.levels:
+        run_dir = args.runs / f"r{level}"
+        runs.append(run_suite(SUITE, level, run_dir, overrides, cases=args.cases, workers=args.workers))
+        args.out.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(run_dir / "planted_bench.csv", args.out / f"planted_bench_level{level}.csv")
+        if level == 2:
+            shutil.copyfile(run_dir / "gallery.png", args.out / "gallery_level2.png")
+    (args.out / "counts_by_level.md").write_text("\n".join(counts_by_level.table(runs)) + "\n")
+    (args.out / "README.md").write_text(page(runs))
+    print(f"wrote {args.out}/", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

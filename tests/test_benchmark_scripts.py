@@ -1,0 +1,116 @@
+"""Every script under benchmarks/ runs, at a tiny size, and writes what it says
+(examples as tests); the documentation's generated tables are current."""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCH = ROOT / "benchmarks"
+#: a short optimization that still ends sparse (a dense pattern would make consolidation slow)
+TINY = ("--set", "stage_iterations=30")
+
+
+def run(script: Path, *args, cwd=None, timeout=900):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    r = subprocess.run([sys.executable, str(script), *map(str, args)], capture_output=True, text=True,
+                       cwd=cwd or ROOT, timeout=timeout, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return r
+
+
+def test_every_script_has_a_test():
+    scripts = {p.relative_to(BENCH).as_posix() for p in BENCH.rglob("*.py")}
+    tested = {"simulate_levels.py", "how_it_works/make_figure.py", "planted/make_suite.py", "planted/reextract.py",
+              "planted/counts_by_level.py", "sweeps/dask_overhead.py", "bench/make_bench.py",
+              "planted_results/make_results.py"}
+    assert scripts == tested
+
+
+def test_simulate_levels_prints_each_level_and_solver():
+    out = run(BENCH / "simulate_levels.py", "--levels", 1, "--repeat", 1).stdout.splitlines()
+    rows = [ln.split() for ln in out[1:-1]]
+    assert [r[5] for r in rows] == ["cg", "direct"] and all(r[0] == "1" for r in rows)
+    assert rows[0][:5] == rows[1][:5] and int(rows[0][4]) > 0  # same problem for both backends
+    assert out[-1].startswith("first solve in the process")
+
+
+def test_how_it_works_draws_five_panels(tmp_path):
+    png = tmp_path / "h.png"
+    r = run(BENCH / "how_it_works" / "make_figure.py", "t_shape_planted_1t_s1", "--level", 1,
+            "--stage-iterations", 30, "--out", png)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "tendons, realizable" in r.stderr
+    from PIL import Image
+    with Image.open(png) as im:
+        assert "commit" in im.info["Comment"]  # the picture records what made it
+
+
+def test_make_suite_regenerates_a_checked_in_case_byte_for_byte(tmp_path):
+    name = "t_shape_planted_1t_s1"
+    run(BENCH / "planted" / "make_suite.py", "--out", tmp_path, "--only", name, "--no-gallery")
+    for ext in (".toml", ".json"):
+        assert (tmp_path / f"{name}{ext}").read_bytes() == (BENCH / "planted" / f"{name}{ext}").read_bytes()
+
+
+@pytest.fixture(scope="module")
+def planted_results(tmp_path_factory):
+    """make_results.py on one case at level 1 (tiny settings): its outputs and run."""
+    out = tmp_path_factory.mktemp("results")
+    run(BENCH / "planted_results" / "make_results.py", "--levels", 1, "--cases", "t_shape_planted_1t_s1",
+        "--workers", 0, "--out", out / "page", "--runs", out / "runs", *TINY)
+    return out
+
+
+def test_make_results_writes_the_results_page(planted_results):
+    page = (planted_results / "page" / "README.md").read_text()
+    run_json = json.loads((planted_results / "runs" / "r1" / "planted_bench.json").read_text())
+    (case,) = run_json["cases"]
+    assert f"| {case['case']} | {case['count']}/{case['planted_count']} {case['best']}" in page
+    assert run_json["provenance"]["commit"] in page or run_json["provenance"]["commit"] is None
+    rows = list(csv.DictReader(open(planted_results / "page" / "planted_bench_level1.csv")))
+    assert [r["case"] for r in rows] == [case["case"]] and int(rows[0]["count"]) == case["count"]
+    assert "same count at every level: 1 of 1" in (planted_results / "page" / "counts_by_level.md").read_text()
+
+
+def test_reextract_reproduces_the_run(planted_results, tmp_path):
+    src = planted_results / "runs" / "r1" / "planted_bench.json"
+    run(BENCH / "planted" / "reextract.py", src, tmp_path / "re.json")
+    (before,), (after,) = json.loads(src.read_text())["cases"], json.loads((tmp_path / "re.json").read_text())["cases"]
+    for key in ("count", "best", "realizable_pose_error_rel", "kinks", "passed"):
+        assert after[key] == before[key], key
+
+
+def test_counts_by_level_tables_the_runs(planted_results):
+    src = planted_results / "runs" / "r1" / "planted_bench.json"
+    out = run(BENCH / "planted" / "counts_by_level.py", src, src).stdout
+    case = json.loads(src.read_text())["cases"][0]
+    assert f"| {case['case']} | {case['planted_count']} | {case['count']}" in out
+    assert "same count at every level: 1 of 1" in out
+
+
+def test_dask_overhead_runs_tasks_on_a_cluster():
+    res = json.loads(run(BENCH / "sweeps" / "dask_overhead.py", "--workers", 1, "--tasks", 4).stdout)
+    assert res["tasks"] == 4 and res["workers"] == 1 and res["overhead_per_task_ms"] > 0
+
+
+def test_make_bench_writes_the_results_and_the_page(tmp_path):
+    out, page = tmp_path / "bench", tmp_path / "docs" / "performance.md"
+    run(BENCH / "bench" / "make_bench.py", "--levels", 1, "--repeat", 1, "--no-optimize", "--out", out,
+        "--page", page)
+    res = json.loads((out / "bench.json").read_text())
+    text = page.read_text()
+    assert res["provenance"]["commit"] is None or res["provenance"]["commit"] in text
+    table = (out / "table.txt").read_text().splitlines()
+    assert table[0].split()[:4] == ["level", "DOFs", "fibers", "solver"] and len(table) == 3
+    assert all(line in text for line in table) and "](../bench/bench.png)" in text
+    assert np.isfinite(res["levels"][0]["solvers"]["direct"]["equilibrium_cold_s"]["median"])
+
+
+def test_the_docs_generated_tables_are_current():
+    run(ROOT / "docs" / "make_docs.py", "--check")
