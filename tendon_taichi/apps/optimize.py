@@ -13,10 +13,9 @@ import numpy as np
 from ..body.problem import Problem, build_problem
 from ..body.scene import Scene
 from ..errors import InputError, Stopped
-from ..io import progress as live
 from ..io.export import pose_arrays, write_export
 from ..io.plots import plot_stages
-from ..io.progress import Progress
+from ..io.progress import Progress, active
 from ..io.recording import Recorder, RecordingError, completed_chunks, read_recording
 from ..objective.settings import settings_dict
 from ..optimizer.homotopy import RunCallbacks, StageResult, run_schedule
@@ -94,7 +93,7 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
     problem export to ``export`` (default: beside the recording); ``png``
     draws stage 0 beside the final stage ("-": beside the recording)."""
     t0 = time.perf_counter()
-    progress = progress or live.active() or Progress(enabled=False)
+    progress = progress or active() or Progress(enabled=False)
     completed: list[StageResult] = []
     if resume is not None:
         run = read_recording(resume)
