@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -31,6 +32,14 @@ def atomic_path(path: str | Path):
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def file_stem(name: str) -> str:
+    """``name`` (a scene's or sweep's, from its file) made safe to name one file
+    or folder: characters other than letters, digits, ``.``, ``_`` and ``-``
+    become ``_`` and leading dots are dropped, so a default output path never
+    leaves its folder, makes folders or hides a file."""
+    return re.sub(r"[^\w.-]", "_", name).lstrip(".") or "unnamed"
 
 
 def _umask() -> int:

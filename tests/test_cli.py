@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 from test_scene import BAD
 
+from tendon_taichi import load_scene
+from tendon_taichi.files import file_stem
 from tendon_taichi.io.export import EXPORT_KEYS
 
 
@@ -93,3 +95,22 @@ def test_wrong_length_contract_file(cli, tmp_path):
     np.save(tmp_path / "r.npy", np.zeros(7))
     r = cli("simulate", "t_shape", "--contract", tmp_path / "r.npy", cwd=tmp_path)
     _assert_one_line_error(r, "has 548 fibers")
+
+
+@pytest.mark.parametrize("name,stem", [("t_shape", "t_shape"), ("../../escaped", "_.._escaped"),
+                                       ("a/b", "a_b"), (".hidden", "hidden"), ("...", "unnamed"),
+                                       ("fingér 2", "fingér_2")])
+def test_file_stem_names_one_file(name, stem):
+    assert file_stem(name) == stem
+
+
+def test_a_scene_name_cannot_steer_default_outputs(cli, tmp_path):
+    """A scene named like a path writes its default output inside recordings/, as one file."""
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    text = load_scene("finger").source.replace('name = "finger"', 'name = "../../escaped/x"')
+    (work / "s.toml").write_text(text)
+    r = cli("simulate", "s.toml", "--uniform", 0.05, cwd=work)
+    assert r.returncode == 0, r.stderr
+    written = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*") if p.is_file())
+    assert written == ["a/b/recordings/_.._escaped_x-r1-simulate.npz", "a/b/s.toml"]

@@ -121,6 +121,25 @@ def test_preconditioners_agree_and_factor_needs_few_iterations():
     assert fac.linear.pre.refreshes >= 1
 
 
+def test_solve_many_after_a_long_cg_solve():
+    """A CG solve that takes long resets its factorization preconditioner; the next
+    right-hand side of solve_many (which does not prepare the Hessian again) must
+    refresh it, and every solution must still be the direct one."""
+    p = build_problem(load_scene("t_shape"), 1)
+    ac = 0.05 * p.fibers.a0
+    cg, direct = NewtonSolver(Model.from_problem(p), "cg"), NewtonSolver(Model.from_problem(p), "direct")
+    for newton in (cg, direct):
+        newton.solve(ac=ac, x0=p.mesh.nodes, tol=1e-12)  # both models at the same equilibrium
+    cg.linear.pre.refresh_iterations = 0  # every solve counts as long
+    rng = np.random.default_rng(3)
+    rhs = [rng.normal(size=p.mesh.nodes.shape) * ~p.fixed[:, None] for _ in range(3)]
+    got = list(cg.linear.solve_many(rhs, 1e-10))
+    want = list(direct.linear.solve_many(rhs, 1e-10))
+    assert len(got) == 3 and cg.linear.pre.refreshes >= 3
+    for a, b in zip(got, want):
+        assert np.abs(a - b).max() <= 1e-7 * np.abs(b).max()
+
+
 def test_solves_are_deterministic():
     p = build_problem(load_scene("t_shape"), 1)
     m = Model.from_problem(p)

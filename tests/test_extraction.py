@@ -3,6 +3,7 @@ strand-tendon equivalence, planted tendons with and without noise, and the
 realizable robot."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -62,6 +63,9 @@ def test_unknown_extractor_and_bad_options():
         load_extractor("strands").make_options({"speed": "1"})
     with pytest.raises(PluginError, match="expects float"):
         load_extractor("strands").make_options({"max_turn": "steep"})
+    for bad in ("nan", "inf", float("nan")):
+        with pytest.raises(PluginError, match="must be a finite number"):
+            load_extractor("strands").make_options({"max_turn": bad})
     assert load_extractor("strands").make_options({"bridge_gaps": "no"}).bridge_gaps is False
 
 
@@ -234,3 +238,36 @@ def test_tendon_json_and_types(square):
     d = t.as_json()
     assert set(d) >= {"waypoints", "length", "tension", "contraction", "anchor", "pull_end"}
     assert np.allclose(d["waypoints"][0], d["anchor"]) and np.allclose(d["waypoints"][-1], d["pull_end"])
+
+
+def test_a_plugins_tendons_are_checked_against_the_lattice(square):
+    from tendon_taichi.extract.checks import check_tendons, read_only_copy
+
+    view = FiberView(square)
+    tau = np.zeros(square.fibers.n_fibers)
+    good = view.tendon(int(view.edges[0][0]), [0], state_of(square, tau))
+    assert check_tendons("p", [good], square) == [good]
+
+    def bad(**change):
+        t = Tendon(good.nodes, good.fibers, good.waypoints, 1.0, 0.0)
+        for k, v in change.items():
+            setattr(t, k, v)
+        return t
+
+    cases = [(bad(nodes=good.nodes[:1], fibers=good.fibers[:0], waypoints=good.waypoints[:1]), "at least two"),
+             (bad(fibers=np.array([square.fibers.n_fibers])), "out of range"),
+             (bad(fibers=np.array([next(f for f in range(square.fibers.n_fibers)
+                                        if set(view.edges[f]) != set(good.nodes.tolist()))])), "does not join"),
+             (bad(waypoints=good.waypoints[:, :1]), "waypoints must be (2, 2)"),
+             (bad(waypoints=good.waypoints + 1e-3), "from its nodes' rest positions")]
+    for t, why in cases:
+        with pytest.raises(PluginError, match=re.escape(f"extractor 'p' returned a malformed tendon (tendon 0: ")):
+            check_tendons("p", [t], square)
+        with pytest.raises(PluginError, match=re.escape(why)):
+            check_tendons("p", [t], square)
+    with pytest.raises(PluginError, match="did not return a list of Tendon"):
+        check_tendons("p", good, square)
+    frozen = read_only_copy(state_of(square, tau))
+    with pytest.raises(ValueError, match="read-only"):
+        frozen.tau[0] = 1.0
+    assert read_only_copy(square).fibers.nodes.flags.writeable is False and square.fibers.nodes.flags.writeable

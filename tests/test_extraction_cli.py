@@ -124,6 +124,39 @@ def test_failing_plugins_do_not_stop_the_others(run_rrd, cli, plugin_path):
     assert [t["waypoints"] for t in out["path_cover"]["tendons"]] == [t["waypoints"] for t in expected["tendons"]]
 
 
+def test_plugins_that_break_the_rules_are_named_and_harm_no_other(run_rrd, cli, plugin_path):
+    """A plugin that edits the state in place, or returns waypoints off its nodes
+    (1 m outside the body) or NaN, fails by name; the extractor after it is unharmed."""
+    env = {"PYTHONPATH": os.pathsep.join([str(plugin_path), os.environ.get("PYTHONPATH", "")])}
+    r = cli("compare", run_rrd, "--no-record", "--no-consolidate", "--extractors", "mutates", "outside",
+            "nan_waypoints", "strands", "--json", env=env)
+    assert r.returncode == 4, r.stderr
+    out = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
+    assert "raised ValueError: assignment destination is read-only" in out["mutates"]["error"]
+    assert "returned a malformed tendon (tendon 0: its waypoints are up to 1 m" in out["outside"]["error"]
+    assert "a waypoint is not a finite number" in out["nan_waypoints"]["error"]
+    errors = [line for line in r.stderr.splitlines() if line.startswith("tendon-taichi: error:")]
+    assert len(errors) == 3 and "Traceback" not in r.stderr
+    alone = json.loads(cli("compare", run_rrd, "--no-record", "--no-consolidate", "--extractors", "strands",
+                           "--json").stdout)
+    assert out["strands"]["metrics"] == alone["extractors"][0]["metrics"]
+    assert out["strands"]["tendons"] == alone["extractors"][0]["tendons"]
+
+
+def test_a_recording_that_cannot_be_rewritten_keeps_the_results(run_rrd, cli, tmp_path):
+    rec = tmp_path / "run.rrd"
+    rec.write_bytes(run_rrd.read_bytes())
+    (tmp_path / ".run.extract.rrd").mkdir()  # the temporary file cannot be made (a read-only folder would do)
+    r = cli("compare", rec, "--no-consolidate", "--extractors", "strands", "--json")
+    assert r.returncode == 2
+    out = json.loads(r.stdout)
+    assert out["extractors"][0]["metrics"]["count"] >= 1 and "were not logged into" in out["record_error"]
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("tendon-taichi: error: the tendons were not logged into")
+    assert rec.read_bytes() == run_rrd.read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".run.extract.rrd", "run.rrd"]
+
+
 def test_the_compare_picture_draws_each_extractors_tendons(run_rrd):
     from tendon_taichi.apps.extract import extract
     from tendon_taichi.extract.settings import ConsolidationSettings

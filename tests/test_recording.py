@@ -193,6 +193,18 @@ def test_bad_recordings(tmp_path, cli, reference):
     _one_line_error(cli("optimize", "--resume", tmp_path / "empty.rrd"), "no completed stage to resume")
 
 
+def test_resume_refuses_another_resolution_or_solver(tmp_path, cli, reference):
+    path, ref = reference
+    rec = tmp_path / "run.rrd"
+    rec.write_bytes(path.read_bytes())
+    other = "cg" if ref["solver"] != "cg" else "direct"
+    _one_line_error(cli("optimize", "--resume", rec, "--resolution", "2", cwd=tmp_path),
+                    f"--resolution 2 cannot be changed when resuming (the run is at level {ref['resolution']})")
+    _one_line_error(cli("optimize", "--resume", rec, "--solver", other, cwd=tmp_path),
+                    f"--solver {other} cannot be changed when resuming (the run used {ref['solver']})")
+    assert rec.read_bytes() == path.read_bytes() and sorted(tmp_path.iterdir()) == [rec]
+
+
 def test_torn_last_frame_is_tolerated(reference, tmp_path, cli):
     """A run killed while writing leaves a torn last frame: the complete part is read."""
     path, _ = reference
@@ -203,6 +215,11 @@ def test_torn_last_frame_is_tolerated(reference, tmp_path, cli):
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out["truncated"] and 1 <= len(out["stages"]) <= 5 and out["reproduces"]
+    r = cli("extract", torn, "--extractor", "strands", "--no-consolidate", "--no-record", "--json")
+    assert r.returncode == 0, r.stderr
+    last = len(out["stages"]) - 1
+    assert json.loads(r.stdout)["truncated"] and json.loads(r.stdout)["stage"] == last
+    assert f"is truncated (an interrupted run?): only its complete stages 0..{last} were read" in r.stderr
 
 
 def test_unreachable_goal_gives_a_best_effort_and_a_warning(tmp_path, cli):

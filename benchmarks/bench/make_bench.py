@@ -2,12 +2,13 @@
 bench.png and table.txt, and the performance page docs/performance.md.
 
 Usage: python benchmarks/bench/make_bench.py [--levels 1 2 3 4 5] [--repeat 3] [--out DIR]
-       [--page FILE] [--no-optimize]
+       [--page FILE] [--optimize-levels N ... | --no-optimize]
 
 Runs the resolution-scaling benchmark on t_shape with both linear backends and
 the whole optimization with the backend ``--solver auto`` picks at each level
 (``tendon-taichi bench t_shape --levels ... --solver cg direct --repeat N
---optimize-solver auto --out DIR``), then writes DIR/table.txt and the page
+--optimize-solver auto --out DIR``; ``--optimize-levels`` runs the whole
+optimization at those levels only), then writes DIR/table.txt and the page
 (the table, the fitted exponents, the plot, the optimization's quality per
 level, the machine and the commit that made it). Defaults: levels 1-5, 3
 repeats, this folder and docs/performance.md; the full run takes about half an
@@ -86,10 +87,11 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--out", type=Path, default=HERE)
     ap.add_argument("--page", type=Path, default=PAGE)
+    ap.add_argument("--optimize-levels", type=int, nargs="+", default=None, metavar="N")
     ap.add_argument("--no-optimize", action="store_true")
     args = ap.parse_args(argv)
     result = run_bench(load_scene("t_shape"), args.levels, ["cg", "direct"], args.repeat, args.out,
-                       [] if args.no_optimize else None, optimize_solver="auto")
+                       [] if args.no_optimize else args.optimize_levels, optimize_solver="auto")
     lines = table(result)
     (args.out / "table.txt").write_text("\n".join(lines) + "\n")
     plot = os.path.relpath(args.out / "bench.png", args.page.parent)

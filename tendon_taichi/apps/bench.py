@@ -27,7 +27,7 @@ import numpy as np
 from ..body.problem import build_problem
 from ..body.scene import Scene
 from ..errors import InputError, Stopped
-from ..files import atomic_path, write_json
+from ..files import atomic_path, file_stem, write_json
 from ..io.plots import plot_bench
 from ..io.progress import Progress
 from ..objective.term import State
@@ -165,7 +165,7 @@ def forward_gradient(ik: SoftIK, r: np.ndarray) -> np.ndarray:
 def optimize_case(scene: Scene, level: int, solver: str, out_dir: str) -> dict:
     """The whole regularized optimization, then every installed extractor on its
     last stage (a task of :func:`~tendon_taichi.tasks.engine.run_tasks`)."""
-    rec = Path(out_dir) / f"{scene.name}-r{level}-{solver}.rrd"
+    rec = Path(out_dir) / f"{file_stem(scene.name)}-r{level}-{solver}.rrd"
     case = run_case(scene, level, rec, solver, log_tendons=False)
     run, dt = case.run, case.optimize_s
     final = run.summary["final"]

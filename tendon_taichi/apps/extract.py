@@ -14,6 +14,7 @@ import numpy as np
 
 from ..body.problem import Problem
 from ..errors import InputError
+from ..extract.checks import check_tendons, read_only_copy
 from ..extract.consolidation import Consolidation, ConsolidationSettings, consolidate
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.plugins import available_extractors, load_extractor
@@ -67,13 +68,18 @@ class Extraction:
     state: IdealizedState
     idealized_pose_error: float
     results: list[ExtractorResult]
+    record_error: str | None = None  # why the tendons could not be logged into the recording
 
     def as_json(self) -> dict:
-        return {"recording": str(self.run.path), "scene": self.run.meta.get("scene"),
-                "resolution": self.problem.level, "stage": self.stage, "k": self.state.k,
+        out = {"recording": str(self.run.path), "scene": self.run.meta.get("scene"),
+                "resolution": self.problem.level, "truncated": self.run.truncated,
+                "stage": self.stage, "k": self.state.k,
                 "body_size": self.problem.size, "idealized_pose_error": self.idealized_pose_error,
                 "idealized_pose_error_rel": self.idealized_pose_error / self.problem.size,
                 "extractors": [r.as_json() for r in self.results]}
+        if self.record_error is not None:
+            out["record_error"] = self.record_error
+        return out
 
 
 def idealized_state(run: RecordedRun, problem: Problem, stage: int, solver: str) -> IdealizedState:
@@ -98,27 +104,19 @@ def idealized_state(run: RecordedRun, problem: Problem, stage: int, solver: str)
                           poses if len(poses) > 1 else None)
 
 
-def _check_tendons(name: str, tendons, problem: Problem) -> list[Tendon]:
-    if not isinstance(tendons, (list, tuple)) or not all(isinstance(t, Tendon) for t in tendons):
-        raise PluginError(f"extractor '{name}' did not return a list of Tendon")
-    nf = problem.fibers.n_fibers
-    for t in tendons:
-        if len(t.nodes) < 2 or len(t.fibers) != len(t.nodes) - 1 or np.any(np.asarray(t.fibers) >= nf):
-            raise PluginError(f"extractor '{name}' returned a malformed tendon")
-    return list(tendons)
-
-
 def run_extractor(name: str, problem: Problem, state: IdealizedState, options: dict | None,
                   run: RecordedRun, solver: str, metric_settings: MetricSettings,
                   consolidation: ConsolidationSettings | None = None) -> ExtractorResult:
-    """Run one extractor, solve its realizable robot, consolidate its tendons
-    (:mod:`~tendon_taichi.extract.consolidation`) and score them; a failing plugin gives a
-    result with ``error`` instead of raising."""
+    """Run one extractor on read-only copies of ``problem`` and ``state``, check
+    its tendons (:mod:`~tendon_taichi.extract.checks`), solve their realizable
+    robot, consolidate them (:mod:`~tendon_taichi.extract.consolidation`) and
+    score them; a failing plugin gives a result with ``error`` instead of raising."""
     t0 = time.perf_counter()
     try:
         ext = load_extractor(name)
         opts = ext.make_options(options) if hasattr(ext, "make_options") else options
-        tendons = _check_tendons(name, ext.extract(problem, state, opts), problem)
+        found = ext.extract(read_only_copy(problem), read_only_copy(state), opts)
+        tendons = check_tendons(name, found, problem)
     except PluginError as exc:
         return ExtractorResult(name, time_s=time.perf_counter() - t0, error=str(exc))
     except Exception as exc:  # noqa: BLE001 - a plugin's bug must not stop the others
@@ -150,7 +148,8 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
             consolidation: ConsolidationSettings | None = None) -> Extraction:
     """Run extractors (default: every installed one) on a recorded stage (default:
     the last completed), each followed by consolidation (default settings unless
-    ``consolidation`` is given); with ``record``, log their tendons into the recording."""
+    ``consolidation`` is given); with ``record``, log their tendons into the
+    recording (when that fails, the results are kept and ``record_error`` says why)."""
     run = read_recording(path)
     if not run.stages:
         raise InputError(f"'{path}' has no completed stage to extract from")
@@ -170,7 +169,11 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation) for n in names]
     out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
     if record and any(r.error is None for r in results):
-        log_tendons(out)
+        try:
+            log_tendons(out)
+        except OSError as exc:
+            out.record_error = (f"the tendons were not logged into '{path}' ({exc.strerror or exc}); "
+                                f"the results above are complete (--no-record skips logging)")
     return out
 
 
@@ -179,9 +182,8 @@ def log_tendons(ex: Extraction) -> None:
     recording under ``/tendons/<extractor>`` at the stage they came from. rerun
     files cannot be appended to, so the recording is rewritten (to a temporary
     file, then renamed over the original); an earlier extraction by the same
-    extractor at the same stage is replaced."""
-    import rerun as rr
-
+    extractor at the same stage is replaced. Raises OSError when it cannot be
+    written (the original is then unchanged)."""
     path = Path(ex.run.path)
     names = {r.name for r in ex.results if r.error is None}
     keep = []
@@ -193,6 +195,20 @@ def log_tendons(ex: Extraction) -> None:
                 continue
         keep.append(ch)
     tmp = path.with_name(f".{path.stem}.extract.rrd")
+    with open(tmp, "wb"):  # an unwritable folder fails here, not inside rerun (which only warns)
+        pass
+    try:
+        _write_with_tendons(ex, tmp, keep)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _write_with_tendons(ex: Extraction, tmp: Path, keep: list) -> None:
+    """Write the recording's chunks ``keep`` and then each extractor's tendons to ``tmp``."""
+    import rerun as rr
+
     rec = rr.RecordingStream(APP_ID, recording_id=ex.run.meta.get("run_id"))
     rec.save(str(tmp), default_blueprint=default_blueprint())
     try:
@@ -219,4 +235,3 @@ def log_tendons(ex: Extraction) -> None:
         rec.flush()
     finally:
         rec.disconnect()
-    os.replace(tmp, path)

@@ -13,6 +13,7 @@ import numpy as np
 from ..body.problem import Problem, build_problem
 from ..body.scene import Scene
 from ..errors import InputError, Stopped
+from ..files import file_stem
 from ..io.export import pose_arrays, write_export
 from ..io.plots import plot_stages
 from ..io.progress import Progress, active
@@ -85,13 +86,16 @@ def _complete(ik: SoftIK, st: StageResult) -> None:
         st.taus = np.array([ps.model.tensions_at(ac, x) for ps, ac, x in zip(ik.poses, acs, st.xs)])
 
 
-def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | Path | None = None,
-             export: str | Path | None = None, log_every: int = 1, progress: Progress | None = None,
-             resume: str | Path | None = None, png: str | Path | None = None) -> RunResult:
-    """Run the regularized soft IK on ``scene`` (or continue the run recorded in
-    ``resume``), recording every stage to ``record`` and writing the final
-    problem export to ``export`` (default: beside the recording); ``png``
-    draws stage 0 beside the final stage ("-": beside the recording)."""
+def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
+             record: str | Path | None = None, export: str | Path | None = None, log_every: int = 1,
+             progress: Progress | None = None, resume: str | Path | None = None,
+             png: str | Path | None = None) -> RunResult:
+    """Run the regularized soft IK on ``scene`` at resolution ``level`` (default
+    1) with the linear ``solver`` (default "auto"), or continue the run recorded
+    in ``resume`` at its own level and solver (a different one given is refused),
+    recording every stage to ``record`` and writing the final problem export to
+    ``export`` (default: beside the recording); ``png`` draws stage 0 beside the
+    final stage ("-": beside the recording)."""
     t0 = time.perf_counter()
     progress = progress or active() or Progress(enabled=False)
     completed: list[StageResult] = []
@@ -99,14 +103,17 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
         run = read_recording(resume)
         if not run.stages:
             raise RecordingError(f"'{resume}' has no completed stage to resume from")
+        _check_resumable(run.meta, level, solver)
         problem = run.problem()
-        solver = run.meta.get("solver", solver)
+        solver = run.meta.get("solver") or solver or "auto"
         completed = [_recorded_stage(rs, problem) for rs in run.stages]
         record = Path(record) if record is not None else Path(resume)
         meta = dict(run.meta)
     else:
-        problem = build_problem(scene, level)
-        record = Path(record) if record is not None else Path(f"recordings/{scene.name}-r{problem.level}.rrd")
+        problem = build_problem(scene, 1 if level is None else level)
+        solver = solver or "auto"
+        default = Path("recordings") / f"{file_stem(scene.name)}-r{problem.level}.rrd"
+        record = Path(record) if record is not None else default
         meta = {"version": __version__, "run_id": uuid.uuid4().hex, "scene": scene.name,
                 "resolution": problem.level, "solver": solver, "log_every": log_every}
     if record.suffix != ".rrd":
@@ -178,6 +185,15 @@ def optimize(scene: Scene, level: int = 1, solver: str = "auto", record: str | P
         extra["png"] = str(png)
     summary = _summary(problem, solver, stages, record, export, t0, ik, extra)
     return RunResult(problem, stages, summary, record, export, warnings)
+
+
+def _check_resumable(meta: dict, level: int | None, solver: str | None) -> None:
+    """Refuse a resolution or linear solver that differs from the recorded run's."""
+    if level is not None and meta.get("resolution") is not None and level != meta["resolution"]:
+        raise InputError(f"--resolution {level} cannot be changed when resuming "
+                         f"(the run is at level {meta['resolution']})")
+    if solver not in (None, "auto") and meta.get("solver") not in (None, solver):
+        raise InputError(f"--solver {solver} cannot be changed when resuming (the run used {meta['solver']})")
 
 
 def _open_recorder(record: Path, problem, settings, meta, log_every, resume, n_done):

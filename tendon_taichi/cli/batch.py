@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from ..errors import InputError
+from ..files import file_stem
 from .common import SOLVER_CHOICES, add_json, json_out
 from .runs import add_optimize_flags, optimize_overrides
 from .tendons import add_consolidation_flags, consolidation
@@ -111,7 +112,7 @@ def cmd_sweep(args) -> int:
 
     workers, scheduler = cluster_args(args)
     sweep = load_sweep(args.sweep)
-    out = args.out or str(Path("recordings") / "sweeps" / sweep.name)
+    out = args.out or str(Path("recordings") / "sweeps" / file_stem(sweep.name))
     result = run(sweep, out, workers, scheduler)
     json_out(args, result)
     if args.json != "-":

@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command is None:
             parser.print_help(sys.stderr)
             return 2
-        if getattr(args, "resolution", 1) < 1:
+        if getattr(args, "resolution", None) is not None and args.resolution < 1:
             raise InputError(f"--resolution must be >= 1 (got {args.resolution})")
         runtime.configure(arch=args.arch, threads=args.threads)
         return int(args.func(args) or 0)

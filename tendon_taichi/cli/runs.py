@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..files import file_stem
 from ..objective.settings import SETTINGS
 from .common import PROG, SOLVER_CHOICES, add_json, json_out
 
@@ -65,7 +66,7 @@ def cmd_simulate(args) -> int:
     problem = build_problem(scene, args.resolution)
     ratios = contraction_ratios(problem, args.uniform if args.contract is None
                                 else _read_ratios(args.contract))
-    export = Path(args.export or f"recordings/{scene.name}-r{problem.level}-simulate.npz")
+    export = Path(args.export or Path("recordings") / f"{file_stem(scene.name)}-r{problem.level}-simulate.npz")
     c = problem.counts()
     print(f"{scene.name} level {problem.level}: {c['nodes']} nodes, {c['triangles']} "
           f"triangles, {c['fibers']} fibers, {c['dofs']} DOFs; solving ({args.solver})...",
@@ -214,11 +215,13 @@ def add_commands(sub) -> None:
 
     s = sub.add_parser("optimize", help="regularized soft IK with the L0 homotopy, recorded to rerun")
     s.add_argument("scene", metavar="SCENE", nargs="?", help="built-in scene name or scene TOML file")
-    s.add_argument("--resolution", type=int, default=1, metavar="N", help="resolution level (default 1)")
+    s.add_argument("--resolution", type=int, default=None, metavar="N",
+                   help="resolution level (default 1; when resuming, the recorded one)")
     s.add_argument("--record", metavar="RUN.rrd", help="recording (default recordings/<scene>-r<N>.rrd)")
     s.add_argument("--export", metavar="OUT.npz", help="final problem export (default: beside the recording)")
-    s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto",
-                   help="linear solver of equilibria and adjoints (default auto: by problem size)")
+    s.add_argument("--solver", choices=SOLVER_CHOICES, default=None,
+                   help="linear solver of equilibria and adjoints (default auto: by problem size; when "
+                        "resuming, the recorded one)")
     s.add_argument("--resume", metavar="RUN.rrd",
                    help="continue an interrupted run from its last completed stage (into --record, "
                         "default the same file)")

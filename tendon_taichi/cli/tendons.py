@@ -84,6 +84,9 @@ def _extraction_output(args, ex) -> int:
         png = Path(args.recording).with_suffix(".compare.png") if args.png == "-" else Path(args.png)
         plot_compare(png, ex)
         out["png"] = str(png)
+    if out["truncated"]:
+        print(f"{PROG}: warning: '{out['recording']}' is truncated (an interrupted run?): only its complete "
+              f"stages 0..{len(ex.run.stages) - 1} were read; extracted from stage {out['stage']}", file=sys.stderr)
     json_out(args, out)
     if args.json != "-":
         print(f"{out['recording']}: {out['scene']} level {out['resolution']}, stage {out['stage']} "
@@ -93,7 +96,9 @@ def _extraction_output(args, ex) -> int:
             print(f"png: {out['png']}")
     for r in failed:
         print(f"{PROG}: error: {r.error}", file=sys.stderr)
-    return 4 if failed else 0
+    if ex.record_error is not None:
+        print(f"{PROG}: error: {ex.record_error}", file=sys.stderr)
+    return 4 if failed else 2 if ex.record_error is not None else 0
 
 
 def add_consolidation_flags(p: argparse.ArgumentParser) -> None:

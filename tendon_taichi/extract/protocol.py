@@ -21,6 +21,7 @@ computed the same way for every extractor by
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -150,7 +151,15 @@ def _convert(name: str, fld: dataclasses.Field, raw):
     typ = fld.type if isinstance(fld.type, type) else {"float": float, "int": int, "bool": bool,
                                                         "str": str}.get(str(fld.type), str)
     if not isinstance(raw, str):
-        return raw
+        value = raw
+    else:
+        value = _parse(name, fld, typ, raw)
+    if isinstance(value, float) and not math.isfinite(value):
+        raise PluginError(f"extractor '{name}': option '{fld.name}' must be a finite number (got {value})")
+    return value
+
+
+def _parse(name: str, fld: dataclasses.Field, typ: type, raw: str):
     try:
         if typ is bool:
             if raw.lower() in ("1", "true", "yes", "on"):

@@ -64,7 +64,7 @@ class Progress:
     def _print(self, text: str) -> None:
         """One line, above the bars while they are live."""
         if self._bars is not None:
-            self._bars.console.print(text, markup=False, highlight=False)
+            self._bars.console.print(text, markup=False, highlight=False, soft_wrap=True)
         else:
             print(text, file=self.stream, flush=True)
 

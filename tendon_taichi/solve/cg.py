@@ -181,6 +181,9 @@ class CGSolver(LinearSolver):
         if self.pre is None:
             st = block_jacobi_pcg(m, rhs, tol=tol, max_iter=self.max_iter, warm=warm)
         else:
+            if self.pre.stale:  # reset by a long solve just before, on the same prepared Hessian
+                self.pre.refresh()
+                m.prepare_hessian(self._project)
             st = host_pcg(m, rhs, tol, self.max_iter, self.pre, warm)
             if st.indefinite_preconditioner or (not st.converged and not st.negative_curvature):
                 # an indefinite reference Hessian, or too far from it

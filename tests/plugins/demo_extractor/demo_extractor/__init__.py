@@ -30,3 +30,41 @@ class Raises(Extractor):
 
     def extract(self, problem, state, options):
         raise RuntimeError("this plugin always fails")
+
+
+class Mutates(Extractor):
+    """Breaks the rules: zeroes the tensions it was given, in place."""
+
+    name = "mutates"
+    description = "edits state.tau in place (test plugin)"
+    api = EXTRACTOR_API
+
+    def extract(self, problem, state, options):
+        state.tau[:] = 0.0
+        return []
+
+
+class Outside(Extractor):
+    """Breaks the rules: a tendon whose waypoints lie 1 m beside its nodes."""
+
+    name = "outside"
+    description = "returns waypoints far outside the body (test plugin)"
+    api = EXTRACTOR_API
+
+    def extract(self, problem, state, options):
+        t = StrongestFiber().extract(problem, state, options)[0]
+        t.waypoints = t.waypoints + 1.0
+        return [t]
+
+
+class NanWaypoints(Extractor):
+    """Breaks the rules: a tendon with NaN waypoints."""
+
+    name = "nan_waypoints"
+    description = "returns NaN waypoints (test plugin)"
+    api = EXTRACTOR_API
+
+    def extract(self, problem, state, options):
+        t = StrongestFiber().extract(problem, state, options)[0]
+        t.waypoints = t.waypoints * float("nan")
+        return [t]
