@@ -130,6 +130,11 @@ def test_make_bench_writes_the_results_and_the_page(tmp_path):
     assert table[0].split()[:4] == ["level", "DOFs", "fibers", "solver"] and len(table) == 3
     assert all(line in text for line in table) and "](../bench/bench.png)" in text
     assert np.isfinite(res["levels"][0]["solvers"]["direct"]["equilibrium_cold_s"]["median"])
+    (out / "table.txt").unlink()
+    again = tmp_path / "site" / "performance.md"  # the page again, from bench.json alone
+    run(BENCH / "bench" / "make_bench.py", "--page-only", "--out", out, "--page", again)
+    assert again.read_text() == text
+    assert (out / "table.txt").read_text().splitlines() == table
 
 
 def test_the_docs_generated_tables_are_current():

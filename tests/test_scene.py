@@ -170,7 +170,8 @@ BAD = {
     "no clamped node": (SQUARE.format(outline="[[0, 0.01], [0.04, 0.01], [0.04, 0.05], [0, 0.05]]"),
                         "not clamped"),
     "target outside": (SQUARE.format(outline="[[0, 0], [0.04, 0], [0.04, 0.04], [0, 0.04]]")
-                       .replace("point = [0.02, 0.04]", "point = [0.05, 0.02]"), "point [0.05, 0.02] lies outside the body"),
+                       .replace("point = [0.02, 0.04]", "point = [0.05, 0.02]"),
+                       "point [0.05, 0.02] lies outside the body"),
     "negative modulus": (SQUARE.format(outline="[[0, 0], [0.04, 0], [0.04, 0.04], [0, 0.04]]")
                          .replace("max_triangle_area", "youngs_modulus = -5.0\nmax_triangle_area"),
                          "youngs_modulus must be > 0"),

@@ -3,6 +3,7 @@ bench.png and table.txt, and the performance page docs/performance.md.
 
 Usage: python benchmarks/bench/make_bench.py [--levels 1 2 3 4 5] [--repeat 3] [--out DIR]
        [--page FILE] [--optimize-levels N ... | --no-optimize]
+       python benchmarks/bench/make_bench.py --page-only [--out DIR] [--page FILE]
 
 Runs the resolution-scaling benchmark on t_shape with both linear backends and
 the whole optimization with the backend ``--solver auto`` picks at each level
@@ -10,12 +11,14 @@ the whole optimization with the backend ``--solver auto`` picks at each level
 --optimize-solver auto --out DIR``; ``--optimize-levels`` runs the whole
 optimization at those levels only), then writes DIR/table.txt and the page
 (the table, the fitted exponents, the plot, the optimization's quality per
-level, the machine and the commit that made it). Defaults: levels 1-5, 3
+level, the machine and the commit that made it); ``--page-only`` writes
+table.txt and the page again from DIR/bench.json without measuring. Defaults: levels 1-5, 3
 repeats, this folder and docs/performance.md; the full run takes about half an
 hour on 2 cores.
 """
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -89,15 +92,20 @@ def main(argv=None) -> int:
     ap.add_argument("--page", type=Path, default=PAGE)
     ap.add_argument("--optimize-levels", type=int, nargs="+", default=None, metavar="N")
     ap.add_argument("--no-optimize", action="store_true")
+    ap.add_argument("--page-only", action="store_true", help="write table.txt and the page from DIR/bench.json")
     args = ap.parse_args(argv)
-    result = run_bench(load_scene("t_shape"), args.levels, ["cg", "direct"], args.repeat, args.out,
-                       [] if args.no_optimize else args.optimize_levels, optimize_solver="auto")
+    if args.page_only:
+        result = json.loads((args.out / "bench.json").read_text())
+    else:
+        result = run_bench(load_scene("t_shape"), args.levels, ["cg", "direct"], args.repeat, args.out,
+                           [] if args.no_optimize else args.optimize_levels, optimize_solver="auto")
     lines = table(result)
     (args.out / "table.txt").write_text("\n".join(lines) + "\n")
     plot = os.path.relpath(args.out / "bench.png", args.page.parent)
     args.page.parent.mkdir(parents=True, exist_ok=True)
     args.page.write_text(page(result, lines, plot))
-    print(f"wrote {args.out}/ (bench.json, bench.csv, bench.png, table.txt) and {args.page}", file=sys.stderr)
+    made = "table.txt" if args.page_only else "bench.json, bench.csv, bench.png, table.txt"
+    print(f"wrote {args.out}/ ({made}) and {args.page}", file=sys.stderr)
     return 0
 
 

@@ -126,6 +126,7 @@ def build_problem(scene: Scene, level: int = 1) -> Problem:
     outside = np.flatnonzero(dist > tol)
     if len(outside):
         i = int(outside[0])
-        raise SceneError(f"{scene.origin}: {scene.target_label(i)}.point [{points[i][0]:g}, {points[i][1]:g}] lies outside the body")
+        x, y = points[i]
+        raise SceneError(f"{scene.origin}: {scene.target_label(i)}.point [{x:g}, {y:g}] lies outside the body")
     goals = np.array([t.goal for t in scene.targets], dtype=float)
     return Problem(scene, int(level), mesh, fixed, fibers, target, goals)

@@ -85,8 +85,9 @@ def _extraction_output(args, ex) -> int:
         plot_compare(png, ex)
         out["png"] = str(png)
     if out["truncated"]:
-        print(f"{PROG}: warning: '{out['recording']}' is truncated (an interrupted run?): only its complete "
-              f"stages 0..{len(ex.run.stages) - 1} were read; extracted from stage {out['stage']}", file=sys.stderr)
+        print(f"{PROG}: warning: '{out['recording']}' is truncated (an interrupted run?): only its "
+              f"complete stages 0..{len(ex.run.stages) - 1} were read; extracted from stage {out['stage']}",
+              file=sys.stderr)
     json_out(args, out)
     if args.json != "-":
         print(f"{out['recording']}: {out['scene']} level {out['resolution']}, stage {out['stage']} "

@@ -36,8 +36,9 @@ def _freeze(obj, seen: set) -> None:
     elif isinstance(obj, dict):
         for v in obj.values():
             _freeze(v, seen)
-    elif dataclasses.is_dataclass(obj) or hasattr(obj, "__dict__"):
-        for v in vars(obj).values():
+    elif not isinstance(obj, type):
+        fields = [getattr(obj, f.name) for f in dataclasses.fields(obj)] if dataclasses.is_dataclass(obj) else []
+        for v in fields + list(getattr(obj, "__dict__", {}).values()):  # __dict__: cached properties too
             _freeze(v, seen)
 
 
