@@ -1,17 +1,26 @@
 """Writing files safely: every output is written to a temporary name beside its
 destination and renamed into place, so an interrupted or failed run never
-leaves a half-written file."""
+leaves a half-written file; a file that several processes rewrite (a run's
+recording) is rewritten under a lock, from an unnamed temporary file."""
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
 import tempfile
+import uuid
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Callable
 
 from .errors import InputError
+
+try:
+    import fcntl
+except ImportError:  # Windows: no advisory locks; writes stay atomic
+    fcntl = None
 
 
 @contextmanager
@@ -32,6 +41,96 @@ def atomic_path(path: str | Path):
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+@contextmanager
+def locked(path: str | Path, on_wait: Callable[[], None] | None = None):
+    """Hold an exclusive lock (flock) on the existing file ``path`` for the block;
+    ``on_wait`` is called once if another process holds it. The lock follows the
+    name: when the holder replaced the file meanwhile, the new file is locked."""
+    path = Path(path)
+    if fcntl is None:
+        yield
+        return
+    waited = False
+    while True:
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                if on_wait is not None and not waited:
+                    on_wait()
+                waited = True
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            if os.fstat(fd).st_ino == os.stat(path).st_ino:
+                break
+        except BaseException:
+            os.close(fd)
+            raise
+        os.close(fd)
+    try:
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def replace_with_bytes(path: str | Path, data: bytes) -> None:
+    """Replace the file ``path`` by one holding ``data``, atomically: a process
+    killed at any moment leaves the old file or the new one. The data go to an
+    unnamed file (O_TMPFILE) that gets a name only to be renamed over ``path``
+    (elsewhere, a named temporary file); leftovers of killed writers are removed."""
+    path = Path(path)
+    _remove_stale_temporaries(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.{uuid.uuid4().hex[:8]}{path.suffix}")
+    try:
+        fd = os.open(path.parent, os.O_TMPFILE | os.O_WRONLY, 0o666)
+        unnamed = True
+    except (AttributeError, OSError) as exc:
+        if isinstance(exc, OSError) and exc.errno not in (errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL):
+            raise
+        fd, unnamed = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), False
+    try:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view):]
+        os.fsync(fd)
+        if unnamed:
+            _link_unnamed(fd, tmp)
+        os.replace(tmp, path)
+    finally:
+        os.close(fd)
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _link_unnamed(fd: int, name: Path) -> None:
+    """Give the O_TMPFILE file ``fd`` the name ``name`` (linkat following the
+    /proc/self/fd link; os.link calls linkat only when given a dir fd)."""
+    folder = os.open(name.parent, os.O_RDONLY)
+    try:
+        os.link(f"/proc/self/fd/{fd}", name, src_dir_fd=folder, follow_symlinks=True)
+    finally:
+        os.close(folder)
+
+
+def _remove_stale_temporaries(path: Path) -> None:
+    """Delete the temporary files of :func:`replace_with_bytes` beside ``path``
+    whose writer is no longer running."""
+    for f in path.parent.glob(f".{path.stem}.*{path.suffix}"):
+        parts = f.name[len(path.stem) + 2:].split(".")
+        if len(parts) == 3 and parts[0].isdigit() and not _running(int(parts[0])):
+            f.unlink(missing_ok=True)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def file_stem(name: str) -> str:

@@ -143,18 +143,26 @@ def test_plugins_that_break_the_rules_are_named_and_harm_no_other(run_rrd, cli, 
     assert out["strands"]["tendons"] == alone["extractors"][0]["tendons"]
 
 
-def test_a_recording_that_cannot_be_rewritten_keeps_the_results(run_rrd, cli, tmp_path):
+def test_a_recording_that_cannot_be_rewritten_keeps_the_results(run_rrd, tmp_path, monkeypatch, capsys):
+    """As in a read-only folder (which root, running these tests, could still write):
+    the results reach stdout, one error line says why, the recording is unchanged."""
+    import tendon_taichi.apps.extract as extract_app
+    from tendon_taichi.cli.main import main
+
+    def refuse(path, data):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(extract_app, "replace_with_bytes", refuse)
     rec = tmp_path / "run.rrd"
     rec.write_bytes(run_rrd.read_bytes())
-    (tmp_path / ".run.extract.rrd").mkdir()  # the temporary file cannot be made (a read-only folder would do)
-    r = cli("compare", rec, "--no-consolidate", "--extractors", "strands", "--json")
-    assert r.returncode == 2
-    out = json.loads(r.stdout)
-    assert out["extractors"][0]["metrics"]["count"] >= 1 and "were not logged into" in out["record_error"]
-    lines = r.stderr.strip().splitlines()
+    assert main(["compare", str(rec), "--no-consolidate", "--extractors", "strands", "--json"]) == 2
+    got = capsys.readouterr()
+    out = json.loads(got.out)
+    assert out["extractors"][0]["metrics"]["count"] >= 1
+    assert out["record_error"].startswith(f"the tendons were not logged into '{rec}' (Permission denied)")
+    lines = got.err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("tendon-taichi: error: the tendons were not logged into")
-    assert rec.read_bytes() == run_rrd.read_bytes()
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".run.extract.rrd", "run.rrd"]
+    assert rec.read_bytes() == run_rrd.read_bytes() and os.listdir(tmp_path) == ["run.rrd"]
 
 
 def test_the_compare_picture_draws_each_extractors_tendons(run_rrd):

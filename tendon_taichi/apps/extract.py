@@ -5,7 +5,6 @@ engine behind the ``extract`` and ``compare`` commands)."""
 from __future__ import annotations
 
 import json
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +19,7 @@ from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.plugins import available_extractors, load_extractor
 from ..extract.protocol import IdealizedState, PluginError, Tendon
 from ..extract.realizable import RealizableResult, solve_realizable_poses
+from ..files import locked, replace_with_bytes
 from ..io.recording import APP_ID, RecordedRun, default_blueprint, mesh_edges, read_chunks, read_recording
 from ..optimizer.soft_ik import state_solver
 from ..physics.model import Model
@@ -145,11 +145,12 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
 def extract(path: str | Path, names: list[str] | None = None, stage: int | None = None,
             options: dict[str, dict] | None = None, solver: str = "recorded",
             metric_settings: MetricSettings | None = None, record: bool = True,
-            consolidation: ConsolidationSettings | None = None) -> Extraction:
+            consolidation: ConsolidationSettings | None = None, on_wait=None) -> Extraction:
     """Run extractors (default: every installed one) on a recorded stage (default:
     the last completed), each followed by consolidation (default settings unless
     ``consolidation`` is given); with ``record``, log their tendons into the
-    recording (when that fails, the results are kept and ``record_error`` says why)."""
+    recording (:func:`log_tendons`; ``on_wait`` is called if another process is
+    writing it; when that fails, the results are kept and ``record_error`` says why)."""
     run = read_recording(path)
     if not run.stages:
         raise InputError(f"'{path}' has no completed stage to extract from")
@@ -170,47 +171,43 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
     if record and any(r.error is None for r in results):
         try:
-            log_tendons(out)
+            log_tendons(out, on_wait)
         except OSError as exc:
             out.record_error = (f"the tendons were not logged into '{path}' ({exc.strerror or exc}); "
                                 f"the results above are complete (--no-record skips logging)")
     return out
 
 
-def log_tendons(ex: Extraction) -> None:
+def log_tendons(ex: Extraction, on_wait=None) -> None:
     """Add each extractor's tendons (rest and realizable) and summary to the run's
-    recording under ``/tendons/<extractor>`` at the stage they came from. rerun
-    files cannot be appended to, so the recording is rewritten (to a temporary
-    file, then renamed over the original); an earlier extraction by the same
-    extractor at the same stage is replaced. Raises OSError when it cannot be
+    recording under ``/tendons/<extractor>`` at the stage they came from; an
+    earlier extraction by the same extractor at the same stage is replaced.
+    rerun files cannot be appended to, so the recording is rewritten, under a
+    lock (``on_wait`` is called when another writer holds it) and from what the
+    file holds then, so that concurrent extractions all keep their tendons; the
+    new file replaces the old atomically. Raises OSError when it cannot be
     written (the original is then unchanged)."""
     path = Path(ex.run.path)
     names = {r.name for r in ex.results if r.error is None}
-    keep = []
-    chunks, _ = read_chunks(path)
-    for ch in chunks:
-        parts = ch.entity_path.split("/")
-        if len(parts) > 2 and parts[1] == "tendons" and parts[2] in names and "stage" in ch.timeline_names:
-            if ex.stage in ch.to_record_batch().column("stage").to_pylist():
-                continue
-        keep.append(ch)
-    tmp = path.with_name(f".{path.stem}.extract.rrd")
-    with open(tmp, "wb"):  # an unwritable folder fails here, not inside rerun (which only warns)
-        pass
-    try:
-        _write_with_tendons(ex, tmp, keep)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with locked(path, on_wait):
+        chunks, _ = read_chunks(path)
+        keep = []
+        for ch in chunks:
+            parts = ch.entity_path.split("/")
+            if len(parts) > 2 and parts[1] == "tendons" and parts[2] in names and "stage" in ch.timeline_names:
+                if ex.stage in ch.to_record_batch().column("stage").to_pylist():
+                    continue
+            keep.append(ch)
+        replace_with_bytes(path, _recording_bytes(ex, keep))
 
 
-def _write_with_tendons(ex: Extraction, tmp: Path, keep: list) -> None:
-    """Write the recording's chunks ``keep`` and then each extractor's tendons to ``tmp``."""
+def _recording_bytes(ex: Extraction, keep: list) -> bytes:
+    """The recording's chunks ``keep``, then each extractor's tendons, as .rrd bytes."""
     import rerun as rr
 
     rec = rr.RecordingStream(APP_ID, recording_id=ex.run.meta.get("run_id"))
-    rec.save(str(tmp), default_blueprint=default_blueprint())
+    memory = rec.memory_recording()
+    rec.send_blueprint(default_blueprint(), make_active=False, make_default=True)  # as save() does
     try:
         rec.send_chunks(keep)
         rec.set_time("stage", sequence=ex.stage)
@@ -233,5 +230,6 @@ def _write_with_tendons(ex: Extraction, tmp: Path, keep: list) -> None:
                             rr.LineStrips2D([c[t.nodes].astype(np.float32) for t in r.tendons], radii=-2.0))
             rec.log(f"{base}/summary", rr.TextDocument(json.dumps(r.as_json()), media_type="text/plain"))
         rec.flush()
+        return memory.drain_as_bytes()
     finally:
         rec.disconnect()

@@ -138,7 +138,7 @@ def cmd_extract(args) -> int:
 
     options = _parse_options(args.option, args.extractor)
     ex = extract(args.recording, [args.extractor], stage=args.stage, options=options, solver=args.solver,
-                 record=not args.no_record, consolidation=consolidation(args))
+                 record=not args.no_record, consolidation=consolidation(args), on_wait=_waiting(args))
     r = ex.results[0]
     if r.error is not None:
         raise TendonError(r.error)
@@ -158,8 +158,15 @@ def cmd_compare(args) -> int:
     from ..apps.extract import extract
 
     ex = extract(args.recording, args.extractors, stage=args.stage, options=_parse_options(args.option, None),
-                 solver=args.solver, record=not args.no_record, consolidation=consolidation(args))
+                 solver=args.solver, record=not args.no_record, consolidation=consolidation(args),
+                 on_wait=_waiting(args))
     return _extraction_output(args, ex)
+
+
+def _waiting(args):
+    """What to say while another process is writing the recording."""
+    return lambda: print(f"{PROG}: waiting for another process to finish writing '{args.recording}'",
+                         file=sys.stderr, flush=True)
 
 
 # ------------------------------------------------------------------ the parsers
