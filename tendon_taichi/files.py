@@ -23,6 +23,24 @@ except ImportError:  # Windows: no advisory locks; writes stay atomic
     fcntl = None
 
 
+def check_writable(path: str | Path, what: str = "output") -> None:
+    """Raise InputError, before any work, when a file cannot be written at ``path``
+    (its folder cannot be made or written, or it is a folder); leaves nothing behind
+    but the folders it made."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"the {what} '{path}' is a folder")
+    above = next((f for f in path.parents if f.exists()), None)
+    if above is not None and not above.is_dir():
+        raise InputError(f"cannot write the {what} '{path}': '{above}' is a file, not a folder")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path.parent):
+            pass
+    except OSError as exc:
+        raise InputError(f"cannot write the {what} '{path}': {exc.strerror or exc}") from None
+
+
 @contextmanager
 def atomic_path(path: str | Path):
     """Yield a temporary path in the destination's folder; rename it to ``path``

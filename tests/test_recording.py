@@ -193,6 +193,15 @@ def test_bad_recordings(tmp_path, cli, reference):
     _one_line_error(cli("optimize", "--resume", tmp_path / "empty.rrd"), "no completed stage to resume")
 
 
+def test_unwritable_outputs_are_refused_before_any_work(tmp_path, cli):
+    (tmp_path / "afile").write_text("")
+    _one_line_error(cli("optimize", "t_shape", "--record", tmp_path / "afile" / "run.rrd", cwd=tmp_path),
+                    f"cannot write the recording '{tmp_path / 'afile' / 'run.rrd'}': '{tmp_path / 'afile'}' is a file")
+    _one_line_error(cli("optimize", "t_shape", "--record", tmp_path / "run.rrd", "--export", tmp_path, cwd=tmp_path),
+                    f"the export '{tmp_path}' is a folder")
+    assert os.listdir(tmp_path) == ["afile"]
+
+
 def test_resume_refuses_another_resolution_or_solver(tmp_path, cli, reference):
     path, ref = reference
     rec = tmp_path / "run.rrd"

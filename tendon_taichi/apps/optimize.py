@@ -13,7 +13,7 @@ import numpy as np
 from ..body.problem import Problem, build_problem
 from ..body.scene import Scene
 from ..errors import InputError, Stopped
-from ..files import file_stem
+from ..files import check_writable, file_stem
 from ..io.export import pose_arrays, write_export
 from ..io.plots import plot_stages
 from ..io.progress import Progress, active
@@ -119,6 +119,8 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
     if record.suffix != ".rrd":
         raise InputError(f"the recording must be an .rrd file (got '{record}')")
     export = Path(export) if export is not None else record.with_suffix(".npz")
+    check_writable(record, "recording")
+    check_writable(export, "export")
     settings = problem.scene.optimize
     ik = SoftIK(problem, settings, solver)
     solver = ik.linear.name
