@@ -169,6 +169,8 @@ BAD = {
                                   "self-intersecting"),
     "no clamped node": (SQUARE.format(outline="[[0, 0.01], [0.04, 0.01], [0.04, 0.05], [0, 0.05]]"),
                         "not clamped"),
+    "every node clamped": (SQUARE.format(outline="[[0, 0], [0.04, 0], [0.04, 0.04], [0, 0.04]]")
+                           + "[[fixed]]\nbox = [[-1, -1], [1, 1]]\n", "every mesh node lies in a [[fixed]] box"),
     "target outside": (SQUARE.format(outline="[[0, 0], [0.04, 0], [0.04, 0.04], [0, 0.04]]")
                        .replace("point = [0.02, 0.04]", "point = [0.05, 0.02]"),
                        "point [0.05, 0.02] lies outside the body"),

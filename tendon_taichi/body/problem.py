@@ -117,6 +117,8 @@ def build_problem(scene: Scene, level: int = 1) -> Problem:
     if not fixed.any():
         raise SceneError(f"{scene.origin}: no mesh node lies in any [[fixed]] box: "
                          "the body is not clamped")
+    if fixed.all():
+        raise SceneError(f"{scene.origin}: every mesh node lies in a [[fixed]] box: nothing can move")
     spacing = scene.fibers.spacing / np.sqrt(2.0) ** (level - 1)
     fibers = build_lattice(mesh, spacing, tol)
     if fibers.n_fibers == 0:
