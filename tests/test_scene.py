@@ -138,6 +138,21 @@ def test_target_on_the_boundary_is_accepted():
     assert np.abs(p.target_positions(p.mesh.nodes) - [0.04, 0.04]).max() < 1e-12
 
 
+def test_a_corrupt_mesh_file_is_a_scene_error(tmp_path, capfd):
+    """meshio prints and exits on a cut VTU file; that becomes one SceneError."""
+    import meshio
+
+    pts = np.array([[0, 0, 0], [0.04, 0, 0], [0, 0.04, 0.0]])
+    meshio.write(str(tmp_path / "ok.vtu"), meshio.Mesh(pts, [("triangle", np.array([[0, 1, 2]]))]))
+    data = (tmp_path / "ok.vtu").read_bytes()
+    (tmp_path / "body.vtu").write_bytes(data[: len(data) // 2])
+    (tmp_path / "s.toml").write_text('name = "cut"\n[body]\nmesh = "body.vtu"\n[[fixed]]\nbox = [[-1, -1], [1, 0]]\n'
+                                     "[[targets]]\npoint = [0.01, 0.01]\ngoal = [0.01, 0.02]\n")
+    with pytest.raises(SceneError, match=re.escape(f"cannot read mesh file '{tmp_path / 'body.vtu'}': Couldn't read")):
+        build_problem(load_scene(tmp_path / "s.toml"), 1)
+    assert capfd.readouterr() == ("", "")
+
+
 @pytest.mark.parametrize("fmt,suffix", [("vtu", ".vtu"), ("gmsh22", ".msh"), ("obj", ".obj")])
 def test_mesh_file_body(tmp_path, fmt, suffix):
     import meshio

@@ -7,6 +7,8 @@ counter-clockwise ``triangles`` (m, 3).
 
 from __future__ import annotations
 
+import contextlib
+import io
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -188,10 +190,14 @@ def read_mesh(path: Path) -> Mesh:
     """Read the triangles of a mesh file with meshio (z coordinates are dropped)."""
     import meshio
 
+    said = io.StringIO()
     try:
-        m = meshio.read(str(path))
-    except Exception as exc:  # meshio raises many types for bad files
-        raise SceneError(f"cannot read mesh file '{path}': {exc}") from None
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            m = meshio.read(str(path))
+    except (Exception, SystemExit) as exc:  # meshio raises many types for bad files; on some it prints and exits
+        lines = [ln for ln in (str(exc) if isinstance(exc, Exception) else said.getvalue()).splitlines() if ln.strip()]
+        why = lines[0].removeprefix("Error: ") if lines else "not a mesh file meshio can read"
+        raise SceneError(f"cannot read mesh file '{path}': {why}") from None
     tris = [c.data for c in m.cells if c.type == "triangle"]
     if not tris:
         raise SceneError(f"mesh file '{path}' has no triangle cells")
