@@ -184,6 +184,9 @@ BAD = {
                                   "self-intersecting"),
     "no clamped node": (SQUARE.format(outline="[[0, 0.01], [0.04, 0.01], [0.04, 0.05], [0, 0.05]]"),
                         "not clamped"),
+    "a 1 um body": ("name = 'tiny'\n[body]\noutline = [[0, 0], [1e-6, 0], [1e-6, 1e-6], [0, 1e-6]]\n"
+                    "[[fixed]]\nbox = [[-1, -1e-8], [1, 1e-8]]\n[[targets]]\npoint = [5e-7, 1e-6]\n"
+                    "goal = [5e-7, 1.1e-6]\n", "no fiber fits inside the body at spacing 0.005 m"),
     "every node clamped": (SQUARE.format(outline="[[0, 0], [0.04, 0], [0.04, 0.04], [0, 0.04]]")
                            + "[[fixed]]\nbox = [[-1, -1], [1, 1]]\n", "every mesh node lies in a [[fixed]] box"),
     "target outside": (SQUARE.format(outline="[[0, 0], [0.04, 0], [0.04, 0.04], [0, 0.04]]")

@@ -92,6 +92,8 @@ def _segments_inside(mesh: Mesh, p0: np.ndarray, p1: np.ndarray, tol: float,
     The segment is cut where it meets the mesh boundary; between cuts it is
     wholly inside or wholly outside, so each piece's midpoint decides."""
     be = mesh.boundary_edges
+    if len(p0) == 0:
+        return np.zeros(0, dtype=bool)
     q0, q1 = mesh.nodes[be[:, 0]], mesh.nodes[be[:, 1]]
     mids, owner = [], []
     for s in range(0, len(p0), chunk):
