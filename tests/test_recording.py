@@ -193,6 +193,24 @@ def test_bad_recordings(tmp_path, cli, reference):
     _one_line_error(cli("optimize", "--resume", tmp_path / "empty.rrd"), "no completed stage to resume")
 
 
+def test_damaged_stage_data_is_one_line(reference, tmp_path, cli):
+    """Bytes flipped inside a stage's stored contractions: every reader refuses the file."""
+    path, _ = reference
+    run = read_recording(path)
+    data = bytearray(path.read_bytes())
+    at = data.find(np.ascontiguousarray(run.stages[2].ac[:4]).tobytes())
+    assert at > 0
+    for k in range(8, 48):
+        data[at + k] ^= 0xFF
+    bad = tmp_path / "damaged.rrd"
+    bad.write_bytes(bytes(data))
+    why = f"'{bad}' is damaged: stage 2's contractions (/stages/ac)"
+    _one_line_error(cli("replay", bad), why)
+    _one_line_error(cli("extract", bad, "--extractor", "strands", "--no-record"), why)
+    _one_line_error(cli("optimize", "--resume", bad, "--record", tmp_path / "new.rrd"), why)
+    assert sorted(os.listdir(tmp_path)) == ["damaged.rrd"]
+
+
 def test_unwritable_outputs_are_refused_before_any_work(tmp_path, cli):
     (tmp_path / "afile").write_text("")
     _one_line_error(cli("optimize", "t_shape", "--record", tmp_path / "afile" / "run.rrd", cwd=tmp_path),

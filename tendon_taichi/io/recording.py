@@ -321,7 +321,31 @@ def read_recording(path: str | Path) -> RecordedRun:
         if s != len(done) or not {"summary", "r", "ac", "tau"} <= set(d):
             break
         done.append(RecordedStage(d["summary"], d["r"], d["ac"], d["tau"], d.get("x")))
+    for i, st in enumerate(done):
+        why = _stage_fault(st, arrays)
+        if why:
+            raise RecordingError(f"'{path}' is damaged: stage {i}'s {why}")
     return RecordedRun(path, meta, scene, arrays, done, truncated)
+
+
+def _stage_fault(st: RecordedStage, arrays: dict) -> str | None:
+    """What is wrong with a recorded stage's vectors, or None: every value finite,
+    ``r`` and ``ac`` of P x f values with ac = r a0, ``tau`` of f, ``x`` (P, n, 2)."""
+    ends = arrays["fiber_nodes"][arrays["fibers"].astype(int)]
+    a0 = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
+    f, n = len(a0), len(arrays["nodes"])
+    for key, v in (("ratios (/stages/r)", st.r), ("contractions (/stages/ac)", st.ac),
+                   ("tensions (/stages/tau)", st.tau), ("equilibria (/stages/x)", st.xs)):
+        if v is not None and not np.isfinite(v).all():
+            return f"{key} are not all finite numbers"
+    if st.r.ndim != 1 or len(st.r) == 0 or len(st.r) % f or st.ac.shape != st.r.shape or st.tau.shape != (f,):
+        return f"vectors have the wrong lengths for {f} fibers"
+    poses = len(st.r) // f
+    if np.abs(st.ac - st.r * np.tile(a0, poses)).max() > 1e-9 * a0.max():
+        return "contractions (/stages/ac) do not match its ratios (/stages/r)"
+    if st.xs is not None and st.xs.shape != (poses, n, 2):
+        return f"equilibria (/stages/x) are not ({poses}, {n}, 2)"
+    return None
 
 
 def completed_chunks(path: str | Path, stages: int):
