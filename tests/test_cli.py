@@ -85,6 +85,9 @@ def test_malformed_scene_gives_one_line_and_writes_nothing(cli, tmp_path, case):
     (["simulate", "t_shape", "--contract", "missing.npy"], "does not exist"),
     (["simulate", "t_shape", "--uniform", 0.1, "--solver", "lu"], "invalid choice"),
     (["frobnicate"], "invalid choice"),
+    (["simulate", "finger", "--resolution", 99, "--uniform", 0.05], "finger at level 99 would have about 1.4e+32"),
+    (["--max-dofs", 100, "simulate", "finger", "--uniform", 0.05], "more than 100 (--max-dofs 100)"),
+    (["--max-dofs", 0, "simulate", "finger", "--uniform", 0.05], "--max-dofs must be >= 1"),
 ])
 def test_bad_command_lines(cli, tmp_path, args, message):
     _assert_one_line_error(cli(*args, cwd=tmp_path), message)

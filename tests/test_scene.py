@@ -220,3 +220,18 @@ def test_malformed_scenes_raise_scene_error(case, tmp_path):
     path.write_text(text)
     with pytest.raises(SceneError, match=re.escape(message)):
         build_problem(load_scene(path), 1)
+
+
+@pytest.mark.parametrize("name", ["t_shape", "gripper", "cross"])
+def test_the_size_estimate_is_close_to_the_mesh(name):
+    """What a scene is refused by (before meshing): the DOFs within 10 % of what meshing
+    gives, the fibers never under the lattice's count and at most 1.5 times it."""
+    from tendon_taichi.body.geometry import signed_area
+    from tendon_taichi.body.size import estimate
+
+    sc = load_scene(name)
+    p = build_problem(sc, 2)
+    area = abs(signed_area(sc.body.outline)) - sum(abs(signed_area(h)) for h in sc.body.holes)
+    dofs, fibers = estimate(area, sc.body.max_triangle_area / 2, sc.fibers.spacing / np.sqrt(2))
+    assert dofs == pytest.approx(p.counts()["dofs"], rel=0.1)
+    assert p.fibers.n_fibers <= fibers <= 1.5 * p.fibers.n_fibers

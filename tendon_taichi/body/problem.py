@@ -15,8 +15,10 @@ import numpy as np
 from .cables import CableSet
 from ..errors import SceneError
 from .fibers import FiberGraph, build_lattice
+from .geometry import signed_area
 from .mesh import Embedding, Mesh, read_mesh, refine, triangulate_polygon
 from .scene import Scene
+from .size import check_size
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,12 +94,17 @@ class Problem:
 
 
 def _mesh_for_level(scene: Scene, level: int) -> Mesh:
+    """The body meshed at ``level``, once :func:`~tendon_taichi.body.size.check_size` allows it."""
     body = scene.body
+    spacing = scene.fibers.spacing / np.sqrt(2.0) ** (level - 1)
     if body.mesh_file is None:
+        area = abs(signed_area(body.outline)) - sum(abs(signed_area(h)) for h in body.holes)
+        check_size(scene.name, level, area, body.max_triangle_area / 2 ** (level - 1), spacing)
         return triangulate_polygon(body.outline, body.holes, body.max_triangle_area / 2 ** (level - 1))
     mesh = read_mesh(body.mesh_file)
     base = body.max_triangle_area or float(np.abs(mesh.areas).max())
     area = base / 2 ** (level - 1)
+    check_size(scene.name, level, float(np.abs(mesh.areas).sum()), area, spacing)
     if level > 1 or np.abs(mesh.areas).max() > area * (1 + 1e-9):
         mesh = refine(mesh, area)
     return mesh

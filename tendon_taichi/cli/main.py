@@ -23,6 +23,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = Parser(prog=PROG, description="Design the tendon layout of a 2D soft robot.")
     p.add_argument("--arch", default=None, help="Taichi backend: cpu (default), cuda, vulkan, gpu")
     p.add_argument("--threads", type=int, default=None, help="CPU threads for Taichi")
+    p.add_argument("--max-dofs", type=int, default=None, metavar="N",
+                   help="refuse problems larger than N degrees of freedom or fibers (default: what half "
+                        "of this machine's memory holds)")
     p.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     for group in (runs, tendons, batch):
@@ -41,6 +44,10 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         if getattr(args, "resolution", None) is not None and args.resolution < 1:
             raise InputError(f"--resolution must be >= 1 (got {args.resolution})")
+        if args.max_dofs is not None:
+            if args.max_dofs < 1:
+                raise InputError(f"--max-dofs must be >= 1 (got {args.max_dofs})")
+            os.environ["TENDON_TAICHI_MAX_DOFS"] = str(args.max_dofs)  # worker processes read it too
         runtime.configure(arch=args.arch, threads=args.threads)
         return int(args.func(args) or 0)
     except TendonError as exc:
