@@ -5,6 +5,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -141,6 +142,18 @@ def test_plugins_that_break_the_rules_are_named_and_harm_no_other(run_rrd, cli, 
                            "--json").stdout)
     assert out["strands"]["metrics"] == alone["extractors"][0]["metrics"]
     assert out["strands"]["tendons"] == alone["extractors"][0]["tendons"]
+
+
+def test_a_plugin_that_hangs_is_given_up(run_rrd, cli, plugin_path):
+    env = {"PYTHONPATH": os.pathsep.join([str(plugin_path), os.environ.get("PYTHONPATH", "")])}
+    t0 = time.perf_counter()
+    r = cli("compare", run_rrd, "--no-record", "--no-consolidate", "--extractors", "sleeps", "strands",
+            "--plugin-timeout", "1", "--json", env=env)
+    assert r.returncode == 4 and time.perf_counter() - t0 < 300, r.stderr  # the plugin sleeps 600 s
+    out = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
+    assert out["sleeps"]["error"] == "extractor 'sleeps' did not finish within 1 s (--plugin-timeout)"
+    assert "error" not in out["strands"] and out["strands"]["metrics"]["count"] >= 1
+    _one_line(cli("compare", run_rrd, "--no-record", "--plugin-timeout", "0"), "--plugin-timeout must be")
 
 
 def test_a_recording_that_cannot_be_rewritten_keeps_the_results(run_rrd, tmp_path, monkeypatch, capsys):

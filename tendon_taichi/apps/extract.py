@@ -13,7 +13,7 @@ import numpy as np
 
 from ..body.problem import Problem
 from ..errors import InputError
-from ..extract.checks import check_tendons, read_only_copy
+from ..extract.checks import PLUGIN_TIMEOUT, call_plugin, check_tendons, read_only_copy
 from ..extract.consolidation import Consolidation, ConsolidationSettings, consolidate
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.plugins import available_extractors, load_extractor
@@ -106,8 +106,10 @@ def idealized_state(run: RecordedRun, problem: Problem, stage: int, solver: str)
 
 def run_extractor(name: str, problem: Problem, state: IdealizedState, options: dict | None,
                   run: RecordedRun, solver: str, metric_settings: MetricSettings,
-                  consolidation: ConsolidationSettings | None = None) -> ExtractorResult:
-    """Run one extractor on read-only copies of ``problem`` and ``state``, check
+                  consolidation: ConsolidationSettings | None = None,
+                  timeout: float = PLUGIN_TIMEOUT) -> ExtractorResult:
+    """Run one extractor on read-only copies of ``problem`` and ``state`` (for at
+    most ``timeout`` s), check
     its tendons (:mod:`~tendon_taichi.extract.checks`), solve their realizable
     robot, consolidate them (:mod:`~tendon_taichi.extract.consolidation`) and
     score them; a failing plugin gives a result with ``error`` instead of raising."""
@@ -115,7 +117,8 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
     try:
         ext = load_extractor(name)
         opts = ext.make_options(options) if hasattr(ext, "make_options") else options
-        found = ext.extract(read_only_copy(problem), read_only_copy(state), opts)
+        view, seen = read_only_copy(problem), read_only_copy(state)
+        found = call_plugin(name, lambda: ext.extract(view, seen, opts), timeout)
         tendons = check_tendons(name, found, problem)
     except PluginError as exc:
         return ExtractorResult(name, time_s=time.perf_counter() - t0, error=str(exc))
@@ -145,10 +148,12 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
 def extract(path: str | Path, names: list[str] | None = None, stage: int | None = None,
             options: dict[str, dict] | None = None, solver: str = "recorded",
             metric_settings: MetricSettings | None = None, record: bool = True,
-            consolidation: ConsolidationSettings | None = None, on_wait=None) -> Extraction:
-    """Run extractors (default: every installed one) on a recorded stage (default:
-    the last completed), each followed by consolidation (default settings unless
-    ``consolidation`` is given); with ``record``, log their tendons into the
+            consolidation: ConsolidationSettings | None = None, on_wait=None,
+            plugin_timeout: float = PLUGIN_TIMEOUT) -> Extraction:
+    """Run extractors (default: every installed one, each for at most
+    ``plugin_timeout`` s) on a recorded stage (default: the last completed), each
+    followed by consolidation (default settings unless ``consolidation`` is
+    given); with ``record``, log their tendons into the
     recording (:func:`log_tendons`; ``on_wait`` is called if another process is
     writing it; when that fails, the results are kept and ``record_error`` says why)."""
     run = read_recording(path)
@@ -167,7 +172,8 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     problem = run.problem()
     state = idealized_state(run, problem, stage, solver)
     ms = metric_settings or MetricSettings()
-    results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation) for n in names]
+    results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout)
+               for n in names]
     out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
     if record and any(r.error is None for r in results):
         try:

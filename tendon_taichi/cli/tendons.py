@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, TendonError
+from ..extract.checks import PLUGIN_TIMEOUT
 from ..extract.settings import BUDGET, GAP, REFINE, SCREEN, TOLERANCE, ConsolidationSettings
 from .common import PROG, SOLVER_CHOICES, add_json, json_out
 
@@ -138,7 +139,8 @@ def cmd_extract(args) -> int:
 
     options = _parse_options(args.option, args.extractor)
     ex = extract(args.recording, [args.extractor], stage=args.stage, options=options, solver=args.solver,
-                 record=not args.no_record, consolidation=consolidation(args), on_wait=_waiting(args))
+                 record=not args.no_record, consolidation=consolidation(args), on_wait=_waiting(args),
+                 plugin_timeout=_timeout(args))
     r = ex.results[0]
     if r.error is not None:
         raise TendonError(r.error)
@@ -159,8 +161,14 @@ def cmd_compare(args) -> int:
 
     ex = extract(args.recording, args.extractors, stage=args.stage, options=_parse_options(args.option, None),
                  solver=args.solver, record=not args.no_record, consolidation=consolidation(args),
-                 on_wait=_waiting(args))
+                 on_wait=_waiting(args), plugin_timeout=_timeout(args))
     return _extraction_output(args, ex)
+
+
+def _timeout(args) -> float:
+    if not args.plugin_timeout > 0 or not math.isfinite(args.plugin_timeout):
+        raise InputError(f"--plugin-timeout must be a finite number of seconds > 0 (got {args.plugin_timeout})")
+    return args.plugin_timeout
 
 
 def _waiting(args):
@@ -192,5 +200,7 @@ def add_commands(sub) -> None:
         s.add_argument("--solver", choices=("recorded",) + SOLVER_CHOICES, default="recorded")
         s.add_argument("--no-record", action="store_true", help="do not log the tendons into the recording")
         add_consolidation_flags(s)
+        s.add_argument("--plugin-timeout", type=float, default=PLUGIN_TIMEOUT, metavar="S",
+                       help=f"give up on an extractor that runs longer than S seconds (default {PLUGIN_TIMEOUT:g})")
         add_json(s)
         s.set_defaults(func=cmd_extract if name == "extract" else cmd_compare)

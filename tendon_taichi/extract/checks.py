@@ -1,11 +1,13 @@
 """The rules a plugin's call obeys: it sees a read-only copy of the problem and
-the state (so it cannot change what the next extractor sees), and what it
-returns is checked before anything is solved or written."""
+the state (so it cannot change what the next extractor sees), it has a time
+limit, and what it returns is checked before anything is solved or written."""
 
 from __future__ import annotations
 
 import copy
 import dataclasses
+import threading
+from typing import Callable
 
 import numpy as np
 
@@ -13,6 +15,30 @@ from .protocol import PluginError, Tendon
 
 #: waypoints may differ from their nodes' rest positions by this fraction of the body size
 WAYPOINT_TOL = 1e-6
+#: seconds a plugin's extract() may take (``--plugin-timeout``)
+PLUGIN_TIMEOUT = 300.0
+
+
+def call_plugin(name: str, fn: Callable, timeout: float = PLUGIN_TIMEOUT):
+    """``fn()`` (extractor ``name``'s call) in a thread of its own: its result or
+    its exception, or PluginError when it runs longer than ``timeout`` s (the
+    thread is then left behind, and ends with the process)."""
+    box: dict = {}
+
+    def target():
+        try:
+            box["value"] = fn()
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller
+            box["error"] = exc
+
+    worker = threading.Thread(target=target, name=f"extractor {name}", daemon=True)
+    worker.start()
+    worker.join(timeout)
+    if worker.is_alive():
+        raise PluginError(f"extractor '{name}' did not finish within {timeout:g} s (--plugin-timeout)")
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
 
 
 def read_only_copy(obj):

@@ -68,3 +68,17 @@ class NanWaypoints(Extractor):
         t = StrongestFiber().extract(problem, state, options)[0]
         t.waypoints = t.waypoints * float("nan")
         return [t]
+
+
+class Sleeps(Extractor):
+    """Breaks the rules: takes ten minutes."""
+
+    name = "sleeps"
+    description = "sleeps for ten minutes (test plugin)"
+    api = EXTRACTOR_API
+
+    def extract(self, problem, state, options):
+        import time
+
+        time.sleep(600)
+        return []
