@@ -101,13 +101,10 @@ def replace_with_bytes(path: str | Path, data: bytes) -> None:
     path = Path(path)
     _remove_stale_temporaries(path)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}.{uuid.uuid4().hex[:8]}{path.suffix}")
-    try:
-        fd = os.open(path.parent, os.O_TMPFILE | os.O_WRONLY, 0o666)
-        unnamed = True
-    except (AttributeError, OSError) as exc:
-        if isinstance(exc, OSError) and exc.errno not in (errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL):
-            raise
-        fd, unnamed = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), False
+    fd = _unnamed_file(path.parent)
+    unnamed = fd is not None
+    if not unnamed:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
         view = memoryview(data)
         while view:
@@ -120,6 +117,19 @@ def replace_with_bytes(path: str | Path, data: bytes) -> None:
         os.close(fd)
         if tmp.exists():
             tmp.unlink()
+
+
+def _unnamed_file(folder: Path) -> int | None:
+    """A writable O_TMPFILE file in ``folder``, or None where the system or the
+    filesystem has none (or /proc, through which it gets its name)."""
+    if not hasattr(os, "O_TMPFILE") or not os.path.isdir("/proc/self/fd"):
+        return None
+    try:
+        return os.open(folder, os.O_TMPFILE | os.O_WRONLY, 0o666)
+    except OSError as exc:
+        if exc.errno in (errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL):
+            return None
+        raise
 
 
 def _link_unnamed(fd: int, name: Path) -> None:
@@ -146,8 +156,8 @@ def _running(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:
-        return True
+    except PermissionError:  # someone else's process
+        pass
     return True
 
 
