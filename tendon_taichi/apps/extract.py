@@ -72,11 +72,11 @@ class Extraction:
 
     def as_json(self) -> dict:
         out = {"recording": str(self.run.path), "scene": self.run.meta.get("scene"),
-                "resolution": self.problem.level, "truncated": self.run.truncated,
-                "stage": self.stage, "k": self.state.k,
-                "body_size": self.problem.size, "idealized_pose_error": self.idealized_pose_error,
-                "idealized_pose_error_rel": self.idealized_pose_error / self.problem.size,
-                "extractors": [r.as_json() for r in self.results]}
+               "resolution": self.problem.level, "truncated": self.run.truncated,
+               "stage": self.stage, "k": self.state.k,
+               "body_size": self.problem.size, "idealized_pose_error": self.idealized_pose_error,
+               "idealized_pose_error_rel": self.idealized_pose_error / self.problem.size,
+               "extractors": [r.as_json() for r in self.results]}
         if self.record_error is not None:
             out["record_error"] = self.record_error
         return out
@@ -109,10 +109,10 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
                   consolidation: ConsolidationSettings | None = None,
                   timeout: float = PLUGIN_TIMEOUT) -> ExtractorResult:
     """Run one extractor on read-only copies of ``problem`` and ``state`` (for at
-    most ``timeout`` s), check
-    its tendons (:mod:`~tendon_taichi.extract.checks`), solve their realizable
-    robot, consolidate them (:mod:`~tendon_taichi.extract.consolidation`) and
-    score them; a failing plugin gives a result with ``error`` instead of raising."""
+    most ``timeout`` s), check its tendons (:mod:`~tendon_taichi.extract.checks`),
+    solve their realizable robot, consolidate them
+    (:mod:`~tendon_taichi.extract.consolidation`) and score them; a failing plugin
+    gives a result with ``error`` instead of raising."""
     t0 = time.perf_counter()
     try:
         ext = load_extractor(name)
