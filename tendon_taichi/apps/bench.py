@@ -163,17 +163,24 @@ def forward_gradient(ik: SoftIK, r: np.ndarray) -> np.ndarray:
 
 
 def optimize_case(scene: Scene, level: int, solver: str, out_dir: str) -> dict:
-    """The whole regularized optimization, then every installed extractor on its
-    last stage (a task of :func:`~tendon_taichi.tasks.engine.run_tasks`)."""
-    rec = Path(out_dir) / f"{file_stem(scene.name)}-r{level}-{solver}.rrd"
-    case = run_case(scene, level, rec, solver, log_tendons=False)
-    run, dt = case.run, case.optimize_s
+    """The whole design pipeline - the regularized optimization, every installed
+    extractor on its last stage with consolidation and route optimization, the
+    recommended design - (a task of :func:`~tendon_taichi.tasks.engine.run_tasks`)."""
+    case = run_case(scene, level, Path(out_dir) / f"{file_stem(scene.name)}-r{level}-{solver}", solver)
+    run, timing = case.run, case.summary["timing"]
+    dt = timing["optimize_s"]
     final = run.summary["final"]
-    res = {"optimize_s": {"median": dt, "min": dt, "max": dt}, "stages": len(run.stages),
-           "pose_error_rel": final["pose_error_rel"], "active_fibers": final["active_fibers"],
-           "active_length": final["active_length"], "evaluations": run.summary.get("evaluations")}
+    rec = case.summary["recommended"]
+    res = {"optimize_s": {"median": dt, "min": dt, "max": dt}, "design_s": case.summary["time_s"],
+           "stages": len(run.stages), "pose_error_rel": final["pose_error_rel"],
+           "active_fibers": final["active_fibers"], "active_length": final["active_length"],
+           "evaluations": run.summary.get("evaluations"),
+           "design": {"tendons": rec["count"], "kinks": rec["metrics"]["kinks"],
+                      "capstan_worst": rec["metrics"]["capstan_worst"],
+                      "realizable_pose_error_rel": rec["metrics"]["realizable_pose_error_rel"]}}
     res["extractors"] = {r.name: ({"error": r.error} if r.error else
                                   {"tendons": r.metrics["count"], "kinks": r.metrics["kinks"],
+                                   "capstan_worst": r.metrics["capstan_worst"],
                                    "realizable_pose_error_rel": r.metrics["realizable_pose_error_rel"]})
                          for r in case.extraction.results}
     res["peak_memory_mb"] = peak_memory_mb()

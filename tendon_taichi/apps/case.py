@@ -1,7 +1,9 @@
-"""One case: a scene at a level, optimized (recorded), then every requested
-extractor on its last stage, each followed by consolidation. ``bench``,
-``sweep``, ``planted-bench`` and the workers' warm-up all run cases through
-:func:`run_case`; each turns the :class:`CaseResult` into its own figures.
+"""One case: a scene at a level through the ``design`` pipeline - optimized
+(recorded), every requested extractor on its last stage, each followed by
+consolidation and route optimization, and the recommended design - in a
+folder of its own. ``bench``, ``sweep``, ``planted-bench`` and the workers'
+warm-up all run cases through :func:`run_case`; each turns the
+:class:`~tendon_taichi.apps.design.Design` into its own figures.
 
 :func:`start_worker` is the set-up every worker process of the task engine
 runs once (start Taichi, compile the kernels by a short case)."""
@@ -10,43 +12,28 @@ from __future__ import annotations
 
 import tempfile
 import time
-from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
 from ..body.scene import Scene, load_scene, with_overrides
-from ..extract.settings import ConsolidationSettings
+from ..extract.settings import BUDGET, ConsolidationSettings
 from ..physics import runtime
-from .extract import Extraction, extract
-from .optimize import Interrupted, RunResult, optimize
+from .design import Design, design
+from .optimize import Interrupted
 
 #: what stops a whole run of cases when a case raises it (Ctrl-C inside an in-process case)
 STOP = (Interrupted,)
 
 
-@dataclass
-class CaseResult:
-    """A finished case: its optimization ``run``, the ``extraction`` of its last
-    stage, and the seconds each took."""
-
-    run: RunResult
-    extraction: Extraction
-    optimize_s: float
-    extract_s: float
-
-
-def run_case(scene: Scene, level: int, record: str | Path, solver: str = "auto",
+def run_case(scene: Scene, level: int, out: str | Path, solver: str = "auto",
              extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
-             log_tendons: bool = True) -> CaseResult:
-    """Optimize ``scene`` at ``level`` into the recording ``record``, then run
-    ``extractors`` (default: every installed one) on its last stage, each
-    followed by ``consolidation`` (default settings if None); ``log_tendons``
-    logs their tendons into the recording."""
-    t0 = time.perf_counter()
-    run = optimize(scene, level, solver, record=record)
-    t1 = time.perf_counter()
-    ex = extract(run.recording, extractors, record=log_tendons, consolidation=consolidation)
-    return CaseResult(run, ex, t1 - t0, time.perf_counter() - t1)
+             budget: float = BUDGET, png: bool = False) -> Design:
+    """The design of ``scene`` at ``level`` into the folder ``out`` (``run.rrd``,
+    ``run.npz``, ``design.json``, ``design.svg``; the pictures with ``png``), with
+    ``extractors`` (default: every installed one), each followed by
+    ``consolidation`` (default settings, with ``budget``, if None)."""
+    return design(scene, level, out, solver, budget, extractors=extractors,
+                  consolidation=consolidation or ConsolidationSettings(budget=budget), png=png)
 
 
 def warm_up() -> float:
@@ -58,8 +45,7 @@ def warm_up() -> float:
     t0 = time.perf_counter()
     scene = with_overrides(load_scene("t_shape"), {"stage_iterations": 3, "k_min": 0.5})
     with tempfile.TemporaryDirectory(prefix="tendon-taichi-warmup-") as tmp:
-        run_case(scene, 1, Path(tmp) / "warm.rrd", consolidation=ConsolidationSettings(tolerance=-1.0),
-                 log_tendons=False)
+        run_case(scene, 1, tmp, consolidation=ConsolidationSettings(tolerance=-1.0, refine=0))
     return time.perf_counter() - t0
 
 

@@ -1,6 +1,7 @@
-"""Extract tendons from a recorded run, prove them on the realizable robot,
-consolidate them (fewer tendons for almost the same pose) and score them (the
-engine behind the ``extract`` and ``compare`` commands)."""
+"""Extract tendons from a recorded run, turn them into smooth routes, prove them
+on the as-built realizable robot (capstan friction included), consolidate them
+(fewer tendons for almost the same pose), optimize the routes and score them
+(the engine behind the ``extract``, ``compare`` and ``design`` commands)."""
 
 from __future__ import annotations
 
@@ -12,15 +13,14 @@ from pathlib import Path
 import numpy as np
 
 from ..body.problem import Problem
-from ..errors import InputError
+from ..errors import ConvergenceError, InputError
 from ..extract.checks import PLUGIN_TIMEOUT, call_plugin, check_tendons, read_only_copy
 from ..extract.consolidation import Consolidation, ConsolidationSettings, consolidate
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.plugins import available_extractors, load_extractor
 from ..extract.protocol import IdealizedState, PluginError, Tendon
-from ..extract.realizable import RealizableResult, solve_realizable_poses
-from ..files import locked, replace_with_bytes
-from ..io.recording import APP_ID, RecordedRun, default_blueprint, mesh_edges, read_chunks, read_recording
+from ..extract.realizable import RealizableResult, deformed_waypoints, solve_realizable_poses
+from ..io.recording import RecordedRun, chunk_at_stage, mesh_edges, read_recording, rewrite
 from ..optimizer.soft_ik import state_solver
 from ..physics.model import Model
 
@@ -107,12 +107,13 @@ def idealized_state(run: RecordedRun, problem: Problem, stage: int, solver: str)
 def run_extractor(name: str, problem: Problem, state: IdealizedState, options: dict | None,
                   run: RecordedRun, solver: str, metric_settings: MetricSettings,
                   consolidation: ConsolidationSettings | None = None,
-                  timeout: float = PLUGIN_TIMEOUT) -> ExtractorResult:
+                  timeout: float = PLUGIN_TIMEOUT, log=None) -> ExtractorResult:
     """Run one extractor on read-only copies of ``problem`` and ``state`` (for at
     most ``timeout`` s), check its tendons (:mod:`~tendon_taichi.extract.checks`),
-    solve their realizable robot, consolidate them
+    turn them into routes, consolidate and optimize them on the as-built robot
     (:mod:`~tendon_taichi.extract.consolidation`) and score them; a failing plugin
-    gives a result with ``error`` instead of raising."""
+    gives a result with ``error`` instead of raising. ``log(text)`` hears of
+    consolidation's steps."""
     t0 = time.perf_counter()
     try:
         ext = load_extractor(name)
@@ -126,16 +127,20 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
         msg = str(exc).splitlines()[0] if str(exc) else ""
         return ExtractorResult(name, time_s=time.perf_counter() - t0,
                                error=f"extractor '{name}' raised {type(exc).__name__}: {msg}")
-    real = solve_realizable_poses(problem, tendons, state, run.settings, solver)
-    cons = consolidate(problem, tendons, state, run.settings, real, consolidation or ConsolidationSettings(),
-                       solver)
-    tendons, real = cons.tendons, cons.realizable
+    try:
+        cons = consolidate(problem, tendons, state, run.settings, consolidation or ConsolidationSettings(), solver,
+                           source=name, log=log)
+    except ConvergenceError as exc:
+        return ExtractorResult(name, time_s=time.perf_counter() - t0,
+                               error=f"extractor '{name}': its tendons' robot cannot be solved ({exc})")
+    real = cons.realizable
+    tendons = cons.tendons
     metrics = tendon_metrics(problem, state, tendons, metric_settings)
-    for t, c in zip(tendons, np.atleast_2d(real.contraction)[0]):  # (several poses: the first's)
-        t.contraction = float(c)
     L = problem.size
     ideal = run.stages[state.stage].summary["pose_error"]
     metrics.update(realizable_pose_error=real.pose_error, realizable_pose_error_rel=real.pose_error_rel,
+                   realizable_pose_error_rel_frictionless=frictionless_error(problem, tendons, state, run.settings,
+                                                                             solver, real),
                    idealized_pose_error_rel=ideal / L,
                    realizable_ratio=real.pose_error / ideal if ideal > 0 else float("inf"))
     metrics["extracted_count"] = cons.extracted_count
@@ -145,15 +150,28 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
                            pose_names=problem.pose_names, consolidation=cons)
 
 
+def frictionless_error(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings, solver: str,
+                       real: RealizableResult) -> float:
+    """The realizable pose error (fraction of L) of ``tendons`` without friction, their
+    contractions solved again (from the as-built ones); the as-built one if there is
+    no friction to remove."""
+    if problem.scene.tendons.friction == 0.0 or not tendons:
+        return real.pose_error_rel
+    bare = problem.with_tendons(friction=0.0)
+    return solve_realizable_poses(bare, tendons, state, settings, solver, real.ratios).pose_error_rel
+
+
 def extract(path: str | Path, names: list[str] | None = None, stage: int | None = None,
             options: dict[str, dict] | None = None, solver: str = "recorded",
             metric_settings: MetricSettings | None = None, record: bool = True,
             consolidation: ConsolidationSettings | None = None, on_wait=None,
-            plugin_timeout: float = PLUGIN_TIMEOUT) -> Extraction:
+            plugin_timeout: float = PLUGIN_TIMEOUT, friction: float | None = None,
+            clearance: float | None = None, log=None) -> Extraction:
     """Run extractors (default: every installed one, each for at most
     ``plugin_timeout`` s) on a recorded stage (default: the last completed), each
     followed by consolidation (default settings unless ``consolidation`` is
-    given); with ``record``, log their tendons into the
+    given); ``friction`` and ``clearance`` replace the scene's [tendons] settings
+    where given; with ``record``, log their tendons into the
     recording (:func:`log_tendons`; ``on_wait`` is called if another process is
     writing it; when that fails, the results are kept and ``record_error`` says why)."""
     run = read_recording(path)
@@ -169,10 +187,10 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     if unknown_opts:
         raise InputError(f"options given for extractor(s) not run: {', '.join(sorted(unknown_opts))}")
     solver = run.meta.get("solver", "auto") if solver == "recorded" else solver
-    problem = run.problem()
+    problem = run.problem().with_tendons(friction=friction, clearance=clearance)
     state = idealized_state(run, problem, stage, solver)
-    ms = metric_settings or MetricSettings()
-    results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout)
+    ms = metric_settings or MetricSettings(mu=problem.scene.tendons.friction)
+    results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout, log)
                for n in names]
     out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
     if record and any(r.error is None for r in results):
@@ -187,55 +205,40 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
 def log_tendons(ex: Extraction, on_wait=None) -> None:
     """Add each extractor's tendons (rest and realizable) and summary to the run's
     recording under ``/tendons/<extractor>`` at the stage they came from; an
-    earlier extraction by the same extractor at the same stage is replaced.
-    rerun files cannot be appended to, so the recording is rewritten, under a
-    lock (``on_wait`` is called when another writer holds it) and from what the
-    file holds then, so that concurrent extractions all keep their tendons; the
-    new file replaces the old atomically. Raises OSError when it cannot be
+    earlier extraction by the same extractor at the same stage is replaced
+    (:func:`~tendon_taichi.io.recording.rewrite`: locked, atomic, concurrent
+    extractions all keep their tendons). Raises OSError when it cannot be
     written (the original is then unchanged)."""
-    path = Path(ex.run.path)
     names = {r.name for r in ex.results if r.error is None}
-    with locked(path, on_wait):
-        chunks, _ = read_chunks(path)
-        keep = []
-        for ch in chunks:
-            parts = ch.entity_path.split("/")
-            if len(parts) > 2 and parts[1] == "tendons" and parts[2] in names and "stage" in ch.timeline_names:
-                if ex.stage in ch.to_record_batch().column("stage").to_pylist():
-                    continue
-            keep.append(ch)
-        replace_with_bytes(path, _recording_bytes(ex, keep))
 
+    def keep(ch) -> bool:
+        parts = ch.entity_path.split("/")
+        return not (len(parts) > 2 and parts[1] == "tendons" and parts[2] in names and chunk_at_stage(ch, ex.stage))
 
-def _recording_bytes(ex: Extraction, keep: list) -> bytes:
-    """The recording's chunks ``keep``, then each extractor's tendons, as .rrd bytes."""
-    import rerun as rr
-
-    rec = rr.RecordingStream(APP_ID, recording_id=ex.run.meta.get("run_id"))
-    memory = rec.memory_recording()
-    rec.send_blueprint(default_blueprint(), make_active=False, make_default=True)  # as save() does
-    try:
-        rec.send_chunks(keep)
+    def add(rr, rec) -> None:
         rec.set_time("stage", sequence=ex.stage)
         rec.set_time("iteration", sequence=int(ex.run.stages[ex.stage].summary.get("step", 0)))
-        p = ex.problem
-        edges = mesh_edges(p.mesh.triangles)
         for r in ex.results:
-            if r.error is not None:
-                continue
-            base = f"/tendons/{r.name}"
-            rest = [t.waypoints.astype(np.float32) for t in r.tendons]
-            rec.log(f"{base}/rest", rr.LineStrips2D(rest, radii=-2.0) if rest else rr.Clear(recursive=False))
-            if r.realizable is not None:
-                x = r.realizable.x
-                c = p.fibers.embedding.positions(p.mesh.triangles, x)
-                rec.log(f"{base}/realizable/mesh", rr.LineStrips2D(x[edges].astype(np.float32),
-                                                                    colors=[(120, 140, 170, 90)], radii=-0.5))
-                if r.tendons:
-                    rec.log(f"{base}/realizable/tendons",
-                            rr.LineStrips2D([c[t.nodes].astype(np.float32) for t in r.tendons], radii=-2.0))
-            rec.log(f"{base}/summary", rr.TextDocument(json.dumps(r.as_json()), media_type="text/plain"))
-        rec.flush()
-        return memory.drain_as_bytes()
-    finally:
-        rec.disconnect()
+            if r.error is None:
+                log_layout(rr, rec, f"/tendons/{r.name}", ex.problem, r.tendons, r.realizable)
+                rec.log(f"/tendons/{r.name}/summary", rr.TextDocument(json.dumps(r.as_json()),
+                                                                      media_type="text/plain"))
+
+    rewrite(ex.run.path, ex.run.meta.get("run_id"), keep, add, on_wait)
+
+
+def log_layout(rr, rec, base: str, problem: Problem, tendons: list[Tendon], real: RealizableResult | None) -> None:
+    """Log tendons at rest (``base/rest``) and on their realizable robot's first pose
+    (``base/realizable/mesh``, ``base/realizable/tendons``)."""
+    rest = [t.waypoints.astype(np.float32) for t in tendons]
+    rec.log(f"{base}/rest", rr.LineStrips2D(rest, radii=-2.0) if rest else rr.Clear(recursive=False))
+    if real is None:
+        return
+    x = real.x
+    edges = mesh_edges(problem.mesh.triangles)
+    rec.log(f"{base}/realizable/mesh", rr.LineStrips2D(x[edges].astype(np.float32),
+                                                        colors=[(120, 140, 170, 90)], radii=-0.5))
+    if tendons:
+        rec.log(f"{base}/realizable/tendons",
+                rr.LineStrips2D([w.astype(np.float32) for w in deformed_waypoints(problem, tendons, x)],
+                                radii=-2.0))

@@ -1,9 +1,11 @@
-"""``sweep``: many independent optimize + extract cases as Dask tasks (``docs/cli.md``).
+"""``sweep``: many independent design cases as Dask tasks (``docs/cli.md``).
 
 A sweep file names scenes, levels, extractors and a grid of ``[optimize]``
-settings; every (scene, level, grid point) is a case. Each case runs
-``optimize`` and then the extractors on its last stage (``compare``), and
-writes ``DIR/cases/<id>/`` (``run.rrd``, ``run.npz``, ``optimize.json``,
+settings (and the ``[tendons]`` ones, ``friction`` and ``clearance``); every
+(scene, level, grid point) is a case. Each case runs the ``design`` pipeline
+(optimize, the extractors on its last stage with consolidation and route
+optimization, the recommended design), and writes ``DIR/cases/<id>/``
+(``run.rrd``, ``run.npz``, ``design.json``, ``design.svg``, ``optimize.json``,
 ``compare.json``, and ``result.json``, the figures the sweep keeps). The
 sweep writes ``DIR/sweep.json``, ``DIR/sweep.csv`` and ``DIR/sweep.png``.
 Cases (:func:`tendon_taichi.apps.case.run_case`) run through :func:`tendon_taichi.tasks.engine.run_tasks`: a local Dask
@@ -37,6 +39,8 @@ from .case import STOP, worker_setup
 from .case import run_case as run_one
 
 SWEEP_KEYS = ("name", "scenes", "levels", "extractors", "solver", "grid", "set")
+#: grid and set keys that are [tendons] settings (the others are [optimize] ones)
+TENDON_KEYS = ("friction", "clearance")
 
 
 class SweepInterrupted(Stopped):
@@ -104,8 +108,10 @@ def _scene_digest(scene: Scene) -> dict:
     return out
 
 
-def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None) -> Sweep:
-    """Validate a parsed sweep file and expand it into cases (scene x level x grid point)."""
+def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None,
+                tendons: dict | None = None) -> Sweep:
+    """Validate a parsed sweep file and expand it into cases (scene x level x grid
+    point); ``tendons`` replaces [tendons] settings of every scene (command line)."""
     base = base or Path.cwd()
     unknown = sorted(set(doc) - set(SWEEP_KEYS))
     if unknown:
@@ -139,21 +145,26 @@ def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None) ->
     for key in set(grid) & set(fixed):
         _fail(origin, f"'{key}' is both in [grid] and in [set]")
     loaded = [_scene(s, base, origin) for s in scenes]
+    given = {k: v for k, v in (tendons or {}).items() if v is not None}
     cases = []
     for scene, level in itertools.product(loaded, levels):
         for point in itertools.product(*grid.values()):
             point = dict(zip(grid, point))
             settings = {**fixed, **point}
-            sc = with_overrides(scene, settings, origin=f"sweep file '{origin}'")
-            cid = case_id({"kind": "sweep", **_scene_digest(scene), "level": level, "settings": settings,
-                           "extractors": list(extractors), "solver": solver})
+            where = f"sweep file '{origin}'"
+            sc = with_overrides(scene, {k: v for k, v in settings.items() if k not in TENDON_KEYS}, origin=where)
+            sc = sc.with_tendons(where, **{k: v for k, v in settings.items() if k in TENDON_KEYS})
+            sc = sc.with_tendons(**given)
+            cid = case_id({"kind": "sweep-design", **_scene_digest(scene), "level": level, "settings": settings,
+                           "tendons": given, "extractors": list(extractors), "solver": solver})
             cases.append(SweepCase(cid, sc, level, settings, point))
     return Sweep(name, None, tuple(loaded), tuple(levels), tuple(extractors), solver, dict(grid), dict(fixed),
                  tuple(cases))
 
 
-def load_sweep(path: str | Path) -> Sweep:
-    """Read and validate a sweep file (TOML); scene paths are relative to it."""
+def load_sweep(path: str | Path, tendons: dict | None = None) -> Sweep:
+    """Read and validate a sweep file (TOML); scene paths are relative to it;
+    ``tendons`` replaces [tendons] settings (:func:`parse_sweep`)."""
     path = Path(path)
     try:
         doc = tomllib.loads(path.read_text())
@@ -163,33 +174,41 @@ def load_sweep(path: str | Path) -> Sweep:
         raise InputError(f"cannot read sweep file '{path}': {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"sweep file '{path}': invalid TOML: {exc}") from None
-    sw = parse_sweep(doc, str(path), path.resolve().parent)
+    sw = parse_sweep(doc, str(path), path.resolve().parent, tendons)
     return Sweep(**{**sw.__dict__, "path": path})
 
 
 # ---------------------------------------------------------------- one case
+#: the figures of the recommended design a sweep keeps
+DESIGN_KEYS = ("realizable_pose_error_rel", "realizable_pose_error_rel_frictionless", "capstan_worst", "kinks",
+               "clearance_min", "total_length")
+
+
 def run_case(scene: Scene, level: int, solver: str, extractors: tuple[str, ...], case_dir: str) -> dict:
-    """Optimize ``scene`` at ``level`` and run ``extractors`` on the last stage; write
-    ``run.rrd``, ``run.npz``, ``optimize.json`` and ``compare.json`` into
-    ``case_dir``. Returns the case's figures: ``optimize`` (the final stage),
-    ``extract`` (per extractor its metrics, or its error), ``stages``."""
+    """Design ``scene`` at ``level`` with ``extractors`` into ``case_dir`` (``run.rrd``,
+    ``run.npz``, ``design.json``, ``design.svg``, ``optimize.json``, ``compare.json``).
+    Returns the case's figures: ``optimize`` (the final stage), ``extract`` (per
+    extractor its metrics, or its error), ``design`` (the recommended design's
+    count, source and figures), ``stages``."""
     d = Path(case_dir)
-    d.mkdir(parents=True, exist_ok=True)
-    case = run_one(scene, level, d / "run.rrd", solver, list(extractors))
+    case = run_one(scene, level, d, solver, list(extractors))
     run, comp = case.run, case.extraction.as_json()
     write_json(run.summary, d / "optimize.json")
     write_json(comp, d / "compare.json")
+    rec = case.summary["recommended"]
     return {"optimize": run.summary["final"], "stages": len(run.stages), "optimize_s": run.summary["time_s"],
             "warnings": run.warnings,
             "extract": {e["name"]: ({"error": e["error"]} if "error" in e else e["metrics"])
-                        for e in comp["extractors"]}}
+                        for e in comp["extractors"]},
+            "design": {"count": rec["count"], "source": rec["source"],
+                       **{k: rec["metrics"][k] for k in DESIGN_KEYS}}}
 
 
 def _describe(value: dict) -> str:
-    f = value["optimize"]
-    tendons = ", ".join(f"{n} {m.get('count', 'failed')}" for n, m in value["extract"].items())
-    return (f"pose {100 * f['pose_error_rel']:.2f}%, active {100 * f['active_length']:.1f} cm, "
-            f"tendons: {tendons}")
+    f, d = value["optimize"], value["design"]
+    return (f"pose {100 * f['pose_error_rel']:.2f}%, active {100 * f['active_length']:.1f} cm, design: "
+            f"{d['count']} tendon(s) from {d['source']}, as built {100 * d['realizable_pose_error_rel']:.2f}%, "
+            f"capstan {d['capstan_worst']:.2f}")
 
 
 # ---------------------------------------------------------------- the sweep
@@ -231,8 +250,8 @@ def case_row(case: SweepCase, o) -> dict:
             row["traceback"] = o.traceback
     else:
         v = o.value
-        row.update(optimize=v["optimize"], extract=v["extract"], stages=v["stages"], optimize_s=v["optimize_s"],
-                   warnings=v.get("warnings", []))
+        row.update(optimize=v["optimize"], extract=v["extract"], design=v["design"], stages=v["stages"],
+                   optimize_s=v["optimize_s"], warnings=v.get("warnings", []))
     if o.worker:
         row["worker"] = o.worker
     return row
@@ -249,7 +268,7 @@ def _flat(prefix: str, value, out: dict) -> None:
 def csv_rows(result: dict) -> tuple[list[str], list[dict]]:
     """sweep.csv: one row per case, figures flattened (``extract.<name>.<metric>``)."""
     keys = ("case", "scene", "level", "settings", "reused", "optimize", "stages", "optimize_s", "extract",
-            "time_s", "error")
+            "design", "time_s", "error")
     rows, columns = [], []
     for r in result["cases"]:
         flat: dict = {}
@@ -280,7 +299,7 @@ def table(result: dict) -> list[str]:
     """The human-readable table of a sweep."""
     names = result["extractors"]
     head = f"{'case':<16} {'scene':<12} {'lvl':>3} {'settings':<34} {'pose':>6} {'active':>7} " + \
-           " ".join(f"{n[:12]:>12}" for n in names) + f" {'time':>6}"
+           " ".join(f"{n[:12]:>12}" for n in names) + f" {'design':>12} {'time':>6}"
     rows = [head]
     for r in result["cases"]:
         s = " ".join(f"{k}={_text(v)}" for k, v in r["settings"].items() if k in result["grid"])
@@ -291,9 +310,10 @@ def table(result: dict) -> list[str]:
         f = r["optimize"]
         ex = " ".join(f"{_tendon_text(r['extract'].get(n, {})):>12}" for n in names)
         rows.append(f"{start} {100 * f['pose_error_rel']:>5.2f}% {100 * f['active_length']:>5.1f}cm {ex} "
-                    f"{r['time_s']:>5.0f}s" + (" (reused)" if r["reused"] else ""))
+                    f"{_tendon_text(r.get('design', {})):>12} {r['time_s']:>5.0f}s" + (" (reused)" if r["reused"] else ""))
     rows.append(f"{len(result['cases'])} cases, {result['failed']} failed, {result['reused']} reused; "
-                f"columns per extractor: tendons / realizable pose error; {result['time_s']:.0f} s")
+                f"columns per extractor and for the recommended design: tendons / as-built pose error; "
+                f"{result['time_s']:.0f} s")
     return rows
 
 

@@ -123,3 +123,50 @@ def segment_params_on_edges(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: 
                     ts.extend([lo, hi])
         out.append(np.clip(np.array(ts, dtype=float), 0.0, 1.0))
     return out
+
+
+class Walls:
+    """The body's walls - its outline and holes - as one shapely polygon, for the
+    clearance of tendon routes: signed distances of points from the nearest wall
+    (positive inside the body) and their gradients."""
+
+    def __init__(self, polygon):
+        self.polygon = polygon
+        self.boundary = polygon.boundary
+        shapely.prepare(self.polygon)
+
+    @classmethod
+    def from_outline(cls, outline: np.ndarray, holes) -> "Walls":
+        return cls(shapely.Polygon(outline, [np.asarray(h) for h in holes]))
+
+    @classmethod
+    def from_triangles(cls, corners: np.ndarray) -> "Walls":
+        """From a mesh's triangles (m, 3, 2): their union."""
+        return cls(shapely.union_all(shapely.polygons(corners)))
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (q,) of points (q, 2) from the nearest wall, m: positive
+        inside the body, negative outside."""
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        d = shapely.distance(shapely.points(p), self.boundary)
+        inside = shapely.intersects_xy(self.polygon, p[:, 0], p[:, 1])
+        return np.where(inside, d, -d)
+
+    def distance_gradient(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distances (q,) and their gradients (q, 2): the unit vector from the
+        nearest wall point to each point (away from the wall, into the body)."""
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        d = self.distance(p)
+        lines = shapely.shortest_line(shapely.points(p), self.boundary)
+        near = shapely.get_coordinates(lines).reshape(-1, 2, 2)[:, 1]
+        away = p - near
+        norm = np.linalg.norm(away, axis=1)
+        g = np.where(norm[:, None] > 0, away / np.maximum(norm, 1e-300)[:, None], 0.0)
+        return d, np.where(d[:, None] < 0, -g, g)
+
+    def polyline_distance(self, points: np.ndarray) -> float:
+        """The least distance (m) of a polyline (k, 2) from the walls (its segments
+        included), negative when it leaves the body."""
+        line = shapely.LineString(np.asarray(points, dtype=float))
+        d = float(shapely.distance(line, self.boundary))
+        return d if shapely.covers(self.polygon, line) else -d

@@ -15,7 +15,7 @@ import numpy as np
 from .cables import CableSet
 from ..errors import SceneError
 from .fibers import FiberGraph, build_lattice
-from .geometry import signed_area
+from .geometry import Walls, signed_area
 from .mesh import Embedding, Mesh, read_mesh, refine, triangulate_polygon
 from .scene import Scene
 from .size import check_size
@@ -57,6 +57,14 @@ class Problem:
         return CableSet.fibers(self.fibers.embedding, self.fibers.edges, self.fibers.a0,
                                self.scene.fibers.stiffness)
 
+    @cached_property
+    def walls(self) -> Walls:
+        """The body's outline and holes (from the scene, or the mesh's triangles)."""
+        body = self.scene.body
+        if body.outline is not None:
+            return Walls.from_outline(body.outline, body.holes)
+        return Walls.from_triangles(self.mesh.nodes[self.mesh.triangles])
+
     @property
     def n_poses(self) -> int:
         return len(self.scene.poses)
@@ -83,6 +91,20 @@ class Problem:
                                target=Embedding(self.target.tri[sel], self.target.bary[sel]),
                                target_goal=self.target_goal[sel]))
         return out
+
+    def with_tendons(self, **changes) -> "Problem":
+        """The same problem with some [tendons] settings of its scene replaced
+        (:meth:`~tendon_taichi.body.scene.Scene.with_tendons`)."""
+        scene = self.scene.with_tendons(**changes)
+        return self if scene is self.scene else replace(self, scene=scene)
+
+    def embed_waypoints(self, nodes: np.ndarray, waypoints: np.ndarray) -> Embedding:
+        """A tendon's waypoints (k, 2) embedded in the rest mesh: exactly as its fiber
+        nodes are when it runs through them (``nodes`` (k,)), else located."""
+        if len(nodes) == len(waypoints):
+            emb = self.fibers.embedding
+            return Embedding(emb.tri[nodes], emb.bary[nodes])
+        return self.mesh.locate(waypoints)[0]
 
     def target_positions(self, x: np.ndarray) -> np.ndarray:
         """Where the target points are (t, 2) for node positions ``x`` (n, 2)."""

@@ -25,6 +25,11 @@ optional unless marked *required*; the defaults below are the documented ones.
 ``[[poses]]`` (instead of ``[[targets]]``: several target poses at once)
     ``name`` (default ``pose<i>``) and ``[[poses.targets]]`` as above. Each pose
     gets its own contractions; one tendon layout serves them all.
+``[tendons]``
+    The realizable robot's tendons: ``friction`` 0.1, the capstan friction
+    coefficient mu of their channels (0: frictionless); ``clearance`` 0.02,
+    the least distance of a route from the outline and the holes, as a
+    fraction of the body size L.
 ``[optimize]``
     See :class:`OptimizeSettings`.
 """
@@ -88,6 +93,31 @@ class FiberSettings:
     eps: float = 0.01
 
 
+#: the largest friction coefficient a scene or the command line may give
+MAX_FRICTION = 2.0
+#: the largest clearance (fraction of L): a route must fit between the walls
+MAX_CLEARANCE = 0.2
+
+
+@dataclass(frozen=True)
+class TendonSettings:
+    """The built tendons (``docs/method.md``, friction and routes): ``friction`` mu
+    of the capstan factor exp(-mu Theta) in the realizable robot and the metrics;
+    ``clearance`` the least distance of a route from the outline and holes, x L."""
+
+    friction: float = 0.1
+    clearance: float = 0.02
+
+    def checked(self, origin: str = "command line") -> "TendonSettings":
+        """Itself, or a SceneError naming the first value out of range."""
+        for key, value, top in (("friction", self.friction, MAX_FRICTION),
+                                ("clearance", self.clearance, MAX_CLEARANCE)):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) \
+                    or not 0.0 <= value <= top:
+                raise SceneError(f"{origin}: tendons.{key} must be a number in [0, {top:g}] (got {value!r})")
+        return self
+
+
 @dataclass(frozen=True)
 class Box:
     """An axis-aligned box, edges included: ``lo`` and ``hi`` corners, m."""
@@ -129,6 +159,7 @@ class Scene:
     optimize: OptimizeSettings
     source: str
     origin: str  # a file path, or "builtin:<name>"
+    tendons: TendonSettings = TendonSettings()
 
     @property
     def targets(self) -> tuple[Target, ...]:
@@ -151,6 +182,11 @@ class Scene:
     def with_optimize(self, **changes) -> "Scene":
         """A copy with some optimize settings replaced (CLI overrides)."""
         return replace(self, optimize=replace(self.optimize, **changes))
+
+    def with_tendons(self, origin: str = "command line", **changes) -> "Scene":
+        """A copy with some [tendons] settings replaced (None values ignored), checked."""
+        changes = {k: v for k, v in changes.items() if v is not None}
+        return replace(self, tendons=replace(self.tendons, **changes).checked(origin)) if changes else self
 
 
 # --------------------------------------------------------------------------- parsing
@@ -216,6 +252,14 @@ def _read_fibers(r: TableReader) -> FiberSettings:
     return fs
 
 
+def _read_tendons(r: TableReader) -> TendonSettings:
+    d = TendonSettings()
+    ts = TendonSettings(friction=r.number("friction", d.friction, ge=0.0, le=MAX_FRICTION),
+                        clearance=r.number("clearance", d.clearance, ge=0.0, le=MAX_CLEARANCE))
+    r.finish()
+    return ts
+
+
 def _array_of_tables(doc: TableReader, key: str, prefix: str = "") -> list[dict]:
     if not doc.has(key):
         raise SceneError(f"{doc.origin}: at least one [[{prefix}{key}]] entry is required")
@@ -260,8 +304,9 @@ def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None
     poses = _read_poses(doc)
     opt = read_optimize(TableReader(doc.raw("optimize") if doc.has("optimize") else {},
                                     "optimize", origin), fibers)
+    tendons = _read_tendons(TableReader(doc.raw("tendons") if doc.has("tendons") else {}, "tendons", origin))
     doc.finish()
-    return Scene(name, body, fibers, tuple(fixed), poses, opt, text, origin)
+    return Scene(name, body, fibers, tuple(fixed), poses, opt, text, origin, tendons)
 
 
 def _read_targets(holder: TableReader, where: str) -> tuple[Target, ...]:

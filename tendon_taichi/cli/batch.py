@@ -11,7 +11,7 @@ from ..errors import InputError
 from ..files import file_stem
 from .common import SOLVER_CHOICES, add_json, json_out
 from .runs import add_optimize_flags, optimize_overrides
-from .tendons import add_consolidation_flags, consolidation
+from .tendons import add_consolidation_flags, add_tendon_flags, consolidation, tendon_settings
 
 
 # ------------------------------------------------------------------ bench
@@ -83,7 +83,8 @@ def cmd_planted_bench(args) -> int:
     overrides = optimize_overrides(args)
     workers, scheduler = cluster_args(args)
     result = run_suite(args.suite, args.resolution, args.out, overrides, args.extractors, args.solver,
-                       args.cases, workers=workers, scheduler=scheduler, consolidation=consolidation(args))
+                       args.cases, workers=workers, scheduler=scheduler, consolidation=consolidation(args),
+                       tendons=tendon_settings(args))
     json_out(args, result)
     if args.json != "-":
         print("\n".join(table(result)))
@@ -111,7 +112,7 @@ def cmd_sweep(args) -> int:
     from ..apps.sweep import load_sweep, run, table
 
     workers, scheduler = cluster_args(args)
-    sweep = load_sweep(args.sweep)
+    sweep = load_sweep(args.sweep, tendon_settings(args))
     out = args.out or str(Path("recordings") / "sweeps" / file_stem(sweep.name))
     result = run(sweep, out, workers, scheduler)
     json_out(args, result)
@@ -156,8 +157,8 @@ def add_commands(sub) -> None:
     add_json(s)
     s.set_defaults(func=cmd_planted)
 
-    s = sub.add_parser("planted-bench", help="optimize + every extractor on a suite of planted layouts, "
-                                             "scored against what was planted")
+    s = sub.add_parser("planted-bench", help="the design pipeline on a suite of planted layouts, scored "
+                                             "against what was planted")
     s.add_argument("suite", metavar="DIR", nargs="?", default="benchmarks/planted",
                    help="folder of planted cases, NAME.toml + NAME.json (default benchmarks/planted)")
     s.add_argument("--resolution", type=int, default=2, metavar="N", help="resolution level (default 2)")
@@ -167,14 +168,15 @@ def add_commands(sub) -> None:
     s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto")
     add_optimize_flags(s)
     add_consolidation_flags(s)
+    add_tendon_flags(s)
     add_cluster_flags(s, "default: one per core")
     add_json(s)
     s.set_defaults(func=cmd_planted_bench)
 
-    s = sub.add_parser("sweep", help="many optimize + extract cases (scenes x levels x a grid of settings) "
-                                     "as tasks on Dask")
+    s = sub.add_parser("sweep", help="many design cases (scenes x levels x a grid of settings) as tasks on Dask")
     s.add_argument("sweep", metavar="SWEEP.toml", help="sweep file (docs/cli.md)")
     s.add_argument("--out", default=None, metavar="DIR", help="default recordings/sweeps/<name>")
+    add_tendon_flags(s)
     add_cluster_flags(s, "default: one per core")
     add_json(s)
     s.set_defaults(func=cmd_sweep)

@@ -15,7 +15,7 @@ import sys
 
 from ..errors import InputError, Stopped, TendonError
 from ..physics import runtime
-from . import batch, runs, tendons
+from . import batch, design, runs, tendons
 from .common import PROG, Parser
 
 
@@ -28,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "of this machine's memory holds)")
     p.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    for group in (runs, tendons, batch):
+    for group in (runs, design, tendons, batch):
         group.add_commands(sub)
     return p
 

@@ -1,5 +1,6 @@
 """The tendon commands: ``extractors``, ``extract`` and ``compare``, and the
-consolidation flags they share with ``planted-bench``."""
+consolidation and [tendons] flags they share with ``design``, ``planted-bench``
+and ``sweep``."""
 
 from __future__ import annotations
 
@@ -62,7 +63,7 @@ def _parse_options(items: list[str], default_name: str | None) -> dict[str, dict
 
 def _metric_table(ex) -> list[str]:
     rows = [f"{'extractor':<18} {'tendons':>7} {'length':>8} {'turning':>8} {'max turn':>8} {'kinks':>5} "
-            f"{'capstan':>7} {'tens.CV':>7} {'coverage':>8} {'realizable':>10} {'x ideal':>7} {'time':>6}"]
+            f"{'capstan':>7} {'tens.CV':>7} {'coverage':>8} {'as built':>10} {'x ideal':>7} {'time':>6}"]
     for r in ex.results:
         if r.error is not None:
             rows.append(f"{r.name:<18} failed: {r.error}")
@@ -103,35 +104,59 @@ def _extraction_output(args, ex) -> int:
     return 4 if failed else 2 if ex.record_error is not None else 0
 
 
-def add_consolidation_flags(p: argparse.ArgumentParser) -> None:
+def add_consolidation_flags(p: argparse.ArgumentParser, budget: bool = True) -> None:
     p.add_argument("--consolidate-tol", type=float, default=TOLERANCE, metavar="F",
-                   help="drop or join extracted tendons while the realizable pose error rises by at most "
+                   help="drop or join tendons while the as-built pose error rises by at most "
                         f"F x L in all (default {TOLERANCE:g}; docs/cli.md 'Consolidation')")
-    p.add_argument("--consolidate-budget", type=float, default=BUDGET, metavar="F",
-                   help="... or while it stays within F x L, the pose error you accept anyway "
-                        f"(default {BUDGET:g}; 0: none)")
+    if budget:
+        p.add_argument("--consolidate-budget", type=float, default=BUDGET, metavar="F",
+                       help="... or while it stays within F x L, the pose error you accept anyway "
+                            f"(default {BUDGET:g}; 0: none)")
     p.add_argument("--join-gap", type=float, default=GAP, metavar="F",
                    help=f"join two tendons whose ends are at most F x L apart (default {GAP:g})")
     p.add_argument("--refine", type=int, default=REFINE, metavar="N",
-                   help="then trim or extend tendon ends, at most N steps in a row, while that lowers the "
-                        f"realizable pose error (default {REFINE}; 0: never)")
+                   help="then optimize the routes (control points, ends and contractions), at most N "
+                        f"rounds (default {REFINE}; 0: keep the fitted routes)")
     p.add_argument("--screen", type=int, default=SCREEN, metavar="N",
-                   help="solve in full only the N refinement candidates a Gauss-Newton step predicts best "
+                   help="solve in full only the N drops and joins a Gauss-Newton step predicts best "
                         f"(default {SCREEN}; 0: solve every one)")
-    p.add_argument("--no-consolidate", action="store_true", help="keep the extracted tendons as they are")
+    p.add_argument("--no-consolidate", action="store_true", help="keep the extracted tendons' routes as they are")
 
 
-def consolidation(args) -> ConsolidationSettings:
-    """The consolidation settings of the command line, validated."""
-    for flag, value in (("--consolidate-tol", args.consolidate_tol), ("--consolidate-budget", args.consolidate_budget),
+def add_tendon_flags(p: argparse.ArgumentParser) -> None:
+    """``--friction`` and ``--clearance``: the scene's [tendons] settings, replaced."""
+    p.add_argument("--friction", type=float, default=None, metavar="MU",
+                   help="capstan friction coefficient of the tendon channels, 0..2 (default: the scene's "
+                        "[tendons] friction, 0.1; 0: frictionless)")
+    p.add_argument("--clearance", type=float, default=None, metavar="F",
+                   help="least distance of a route from the outline and holes, F x L, 0..0.2 (default: "
+                        "the scene's [tendons] clearance, 0.02)")
+
+
+def tendon_settings(args) -> dict:
+    """``friction`` and ``clearance`` of the command line (None: the scene's), validated."""
+    from ..body.scene import MAX_CLEARANCE, MAX_FRICTION
+
+    for flag, value, top in (("--friction", args.friction, MAX_FRICTION),
+                             ("--clearance", args.clearance, MAX_CLEARANCE)):
+        if value is not None and not (math.isfinite(value) and 0.0 <= value <= top):
+            raise InputError(f"{flag} must be a number in [0, {top:g}] (got {value:g})")
+    return {"friction": args.friction, "clearance": args.clearance}
+
+
+def consolidation(args, budget: float | None = None) -> ConsolidationSettings:
+    """The consolidation settings of the command line (``budget``: the one a command
+    takes as its own flag), validated."""
+    budget = args.consolidate_budget if budget is None else budget
+    for flag, value in (("--consolidate-tol", args.consolidate_tol), ("--consolidate-budget", budget),
                         ("--join-gap", args.join_gap)):
         if value < 0 or not math.isfinite(value):
-            raise InputError(f"{flag} must be a finite number >= 0 (got {value})")
+            raise InputError(f"{flag} must be a finite number >= 0 (got {value:g})")
     for flag, value in (("--refine", args.refine), ("--screen", args.screen)):
         if value < 0:
             raise InputError(f"{flag} must be an integer >= 0 (got {value})")
     return ConsolidationSettings(-1.0 if args.no_consolidate else args.consolidate_tol, args.join_gap,
-                                 args.consolidate_budget, args.refine, args.screen)
+                                 budget, args.refine, args.screen)
 
 
 def cmd_extract(args) -> int:
@@ -140,16 +165,16 @@ def cmd_extract(args) -> int:
     options = _parse_options(args.option, args.extractor)
     ex = extract(args.recording, [args.extractor], stage=args.stage, options=options, solver=args.solver,
                  record=not args.no_record, consolidation=consolidation(args), on_wait=_waiting(args),
-                 plugin_timeout=_timeout(args))
+                 plugin_timeout=plugin_timeout(args), **tendon_settings(args))
     r = ex.results[0]
     if r.error is not None:
         raise TendonError(r.error)
     if args.svg:
-        from ..io.export import write_svg
+        from ..io.drawing import write_svg
         write_svg(args.svg, ex.problem, r.tendons, f"{ex.problem.scene.name} - {r.name}")
     if args.json != "-":
         for i, t in enumerate(r.tendons):
-            print(f"tendon {i + 1}: {100 * t.length:.1f} cm, {len(t.nodes)} waypoints, tension "
+            print(f"tendon {i + 1}: {100 * t.length:.1f} cm, {len(t.waypoints)} waypoints, strand tension "
                   f"{t.tension:.3f} N (sd {t.tension_std:.3f}), contraction {1e3 * (t.contraction or 0):.2f} mm")
         if args.svg:
             print(f"svg: {args.svg}")
@@ -161,11 +186,11 @@ def cmd_compare(args) -> int:
 
     ex = extract(args.recording, args.extractors, stage=args.stage, options=_parse_options(args.option, None),
                  solver=args.solver, record=not args.no_record, consolidation=consolidation(args),
-                 on_wait=_waiting(args), plugin_timeout=_timeout(args))
+                 on_wait=_waiting(args), plugin_timeout=plugin_timeout(args), **tendon_settings(args))
     return _extraction_output(args, ex)
 
 
-def _timeout(args) -> float:
+def plugin_timeout(args) -> float:
     if not args.plugin_timeout > 0 or not math.isfinite(args.plugin_timeout):
         raise InputError(f"--plugin-timeout must be a finite number of seconds > 0 (got {args.plugin_timeout})")
     return args.plugin_timeout
@@ -200,6 +225,7 @@ def add_commands(sub) -> None:
         s.add_argument("--solver", choices=("recorded",) + SOLVER_CHOICES, default="recorded")
         s.add_argument("--no-record", action="store_true", help="do not log the tendons into the recording")
         add_consolidation_flags(s)
+        add_tendon_flags(s)
         s.add_argument("--plugin-timeout", type=float, default=PLUGIN_TIMEOUT, metavar="S",
                        help=f"give up on an extractor that runs longer than S seconds (default {PLUGIN_TIMEOUT:g})")
         add_json(s)

@@ -1,68 +1,65 @@
-"""Tendon consolidation: fewer tendons for (almost) the same pose.
+"""Tendon consolidation: fewer tendons for (almost) the same pose, each a smooth
+route that a designer can build.
 
 An extractor reads strands off the idealized tensions; it does not know what a
-tendon costs. A designer pays for every tendon (a motor, an anchor, routing),
-so after extraction the engine greedily reduces the count, proving every step
-on the realizable robot (:mod:`~tendon_taichi.extract.realizable`). Each reduction
-round tries
+tendon costs, and its tendons are chains of lattice fibers. Consolidation
+first fits every extracted tendon with a smooth route that keeps the
+clearance from the walls (:mod:`.routes`), then greedily reduces the count,
+proving every step on the *as-built* realizable robot - the body with only
+those routes, capstan friction included (:mod:`.realizable`). Each round tries
 
-* **drop** one tendon, and
-* **join** two tendons whose ends lie within ``gap`` x L (rest coordinates),
-  bridged by the shortest fiber path between those ends - one cable, one
-  tension;
+* **drop** one route, and
+* **join** two routes whose ends lie within ``gap`` x L: one smooth route
+  along both and across the gap (never a path through the lattice),
 
-solves the realizable robot for every candidate, and keeps the candidate with
-the lowest realizable pose error, provided that error is at most the larger of
+and ranks them by what route optimization minimizes (:mod:`.routing`): the
+as-built pose error squared plus the friction price of the pull the routes
+lose to their bends - so a join that loses more pull than it buys in pose
+ranks below the drop that avoids it. A round first **screens** its candidates
+by one Gauss-Newton step each from the current layout's solution
+(:func:`~tendon_taichi.extract.realizable.predict_realizable`), then solves
+the ``screen`` best in full (``screen`` 0: every one, unscreened). The best is
+kept when its as-built error is at most the larger of
 
-* the extracted layout's error plus ``tolerance`` x L (the rise is cumulative
-  over all rounds): a tendon that buys less pose accuracy than that is not
-  worth its motor, and
-* ``budget`` x L, the pose error the designer accepts anyway: while the pose
-  is within it, fewer tendons are better;
+* the extracted layout's error plus ``tolerance`` x L (cumulative over all
+  rounds): a tendon that buys less pose accuracy than that is not worth its
+  motor, and
+* ``budget`` x L, the pose error the designer accepts anyway;
 
-a candidate whose robot cannot be solved is skipped. **Refinement** tries
-
-* **trim** one fiber off one end of one tendon, and
-* **extend** one end by one lattice fiber that turns by at most ``MAX_TURN``
-  and reaches a fiber node no tendon uses,
-
-keeps the best, and repeats, at most ``refine`` rounds, while each round
-lowers the realizable pose error by at least ``REFINE_GAIN`` of it (and
-``REFINE_FLOOR`` x L). A round first **screens** its candidates by one
-Gauss-Newton step each from the current layout's solution
-(:func:`~tendon_taichi.extract.realizable.predict_realizable`, a few linear solves
-instead of an L-BFGS-B run), then solves in full, from the predicted
-contractions, only the ``screen`` best predicted, and of those only the ones
-predicted to make the gain a step needs (within ``SCREEN_MARGIN``). When the
-best reduction is outside the bound, it is refined, and kept if that brings it
-within. When no reduction fits, the layout left is refined, and if that
-helped the reductions are tried again. Why: an extractor follows the idealized
-tensions, which the realizable robot - one tension per tendon - cannot
-reproduce exactly, and a dropped tendon's work can often be taken over by a
-neighbour grown a little longer. Both bounds and the reach are fractions of the
-body size, so they mean the same at every resolution.
+when it is outside (by at most a factor REACH), its routes are optimized,
+and it is kept if that brings it within. At the end the routes left are **oriented** (each pulled at the
+end that serves the pose at least cost) and **optimized**: control points,
+anchors, pull ends and contractions together, at most ``refine`` rounds.
+Both bounds and the reach are fractions of the body size, and routes do not
+depend on the mesh, so they mean the same at every resolution.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import NamedTuple
+from dataclasses import dataclass, field, replace
+from typing import Callable, NamedTuple
 
 import numpy as np
 
 from ..body.problem import Problem
 from ..errors import ConvergenceError
 from ..objective.settings import OptimizeSettings
-from .fiber_view import FiberView
-from .protocol import IdealizedState, Tendon
-from .realizable import RealizableResult, predict_realizable, solve_realizable_poses
-from .settings import MAX_TURN, REFINE_FLOOR, REFINE_GAIN, SCREEN_MARGIN, ConsolidationSettings
+from .protocol import IdealizedState, Tendon, turn_angles
+from .realizable import RealizableResult, pose_tension, predict_realizable, solve_realizable_poses, warm_ratios
+from .routes import Route, fit_route, join_routes, keep_clear, sample_count
+from .routing import RouteSettings, optimize_routes
+from .settings import ConsolidationSettings
+
+
+#: a reduction whose as-built error is at most REACH times the bound is optimized to try to bring it within
+REACH = 2.0
+
 
 @dataclass
 class Step:
-    """One accepted round: ``action`` ('drop', 'join', 'trim' or 'extend'), the indices of the tendons
-    it acted on (in the list before the round), and the count and realizable pose
-    error (fraction of L) after it."""
+    """One accepted change: ``action`` ('drop', 'join', 'orient' or 'route'), the
+    indices of the routes it acted on (in the list before it), and the count and
+    as-built pose error (fraction of L) after it."""
 
     action: str
     tendons: tuple[int, ...]
@@ -75,214 +72,309 @@ class Step:
 
 
 @dataclass
-class Consolidation:
-    """The consolidated ``tendons``, their ``realizable`` robot, and the ``steps``
-    taken from the ``extracted_count`` tendons whose realizable pose error was
-    ``extracted_pose_error_rel``; ``evaluations`` candidate layouts were solved in
-    full, of which ``unsolved`` could not be solved (an equilibrium did not
-    converge) and were skipped; ``screened`` refinement candidates were screened
-    (a candidate whose screen fails counts as unsolved)."""
+class Layout:
+    """Routes with their solved as-built robot, and what a designer weighs them by."""
 
-    tendons: list[Tendon]
+    routes: list[Route]
     realizable: RealizableResult
-    extracted_count: int
-    extracted_pose_error_rel: float
-    steps: list[Step] = field(default_factory=list)
-    evaluations: int = 0
-    unsolved: int = 0
-    screened: int = 0
+    cost: float
+    source: str
+    optimized: bool = False  # oriented and route-optimized (:func:`finish`)
 
-    def as_json(self) -> dict:
-        return {"extracted_count": self.extracted_count,
-                "extracted_realizable_pose_error_rel": self.extracted_pose_error_rel,
-                "steps": [s.as_json() for s in self.steps], "evaluations": self.evaluations,
-                "unsolved": self.unsolved, "screened": self.screened}
-
-
-class Bridges:
-    """Joins of two tendons through the fiber lattice (rest coordinates); ``gap``
-    is the reach as a fraction of the body size."""
-
-    def __init__(self, problem: Problem, state: IdealizedState, gap: float):
-        from scipy.sparse import csr_matrix
-
-        f = problem.fibers
-        self.view = FiberView(problem)
-        self.state = state
-        self.reach = gap * problem.size
-        n, e = len(f.nodes), f.edges
-        self.graph = csr_matrix((np.r_[f.a0, f.a0], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
-                                shape=(n, n))
-
-    def joins(self, a: Tendon, b: Tendon) -> list[Tendon]:
-        """Every join of ``a`` and ``b`` end to end (up to four: either end of each)
-        whose ends are within reach and whose bridged path visits no node twice."""
-        out = []
-        for na in (a.nodes[::-1], a.nodes):  # na ends at the joint
-            for nb in (b.nodes, b.nodes[::-1]):  # nb starts there
-                t = self.join(na, nb)
-                if t is not None:
-                    out.append(t)
-        return out
-
-    def join(self, na: np.ndarray, nb: np.ndarray) -> Tendon | None:
-        """The tendon along ``na``, the shortest fiber path from its last node to the
-        first of ``nb``, then ``nb``; None when the ends are out of reach."""
-        from scipy.sparse.csgraph import dijkstra
-
-        u, v = int(na[-1]), int(nb[0])
-        nodes = self.view.nodes
-        if np.linalg.norm(nodes[u] - nodes[v]) > self.reach:
-            return None
-        dist, pred = dijkstra(self.graph, indices=u, return_predecessors=True, limit=2.0 * self.reach)
-        if not np.isfinite(dist[v]):
-            return None
-        bridge = [v]
-        while bridge[-1] != u:
-            bridge.append(int(pred[bridge[-1]]))
-        path = [int(w) for w in na] + bridge[::-1][1:-1] + [int(w) for w in nb]
-        if len(set(path)) != len(path):
-            return None
-        fibers = [self._fiber(path[k], path[k + 1]) for k in range(len(path) - 1)]
-        return self.view.tendon(path[0], fibers, self.state)
-
-    def _fiber(self, u: int, w: int) -> int:
-        """The fiber joining fiber nodes u and w (neighbours on a path)."""
-        return next(int(f) for f in self.view.incident(u) if self.view.other(int(f), u) == w)
-
-
-class Candidate(NamedTuple):
-    """A layout tried: the ``action`` that made it, the indices of the tendons it
-    acted on, the ``tendons`` and their solved ``realizable`` robot."""
-
-    action: str
-    ids: tuple[int, ...]
-    tendons: list[Tendon]
-    realizable: RealizableResult
+    @property
+    def count(self) -> int:
+        return len(self.routes)
 
     @property
     def error(self) -> float:
         return self.realizable.pose_error_rel
 
+    def tendons(self) -> list[Tendon]:
+        """The routes as tendons, each with its contraction (the first pose's)."""
+        out = []
+        for r, c in zip(self.routes, np.atleast_2d(self.realizable.contraction)[0] if self.routes else []):
+            t = r.tendon()
+            t.contraction = float(c)
+            out.append(t)
+        return out
+
+    def front_entry(self, mu: float, kink_angle: float) -> dict:
+        """The figures of this layout on the count/error front."""
+        turns = [turn_angles(r.waypoints) for r in self.routes]
+        capstan = [float(np.exp(-mu * t.sum())) for t in turns]
+        return {"count": self.count, "realizable_pose_error_rel": self.error,
+                "capstan_worst": min(capstan, default=1.0),
+                "kinks": int(sum((t > np.radians(kink_angle)).sum() for t in turns)),
+                "total_length": float(sum(r.length for r in self.routes)), "source": self.source}
+
+
+@dataclass
+class Consolidation:
+    """The consolidated ``layout`` (routes and their as-built robot), the ``steps``
+    taken from the ``extracted_count`` tendons whose fitted routes had the as-built
+    pose error ``extracted_pose_error_rel``, and per count the layout it passed
+    through (``front``); ``evaluations`` candidate layouts were solved in full, of
+    which ``unsolved`` could not be (an equilibrium did not converge) and were
+    skipped; ``screened`` candidates were screened; ``route_evaluations``
+    equilibria were solved by route optimization."""
+
+    layout: Layout
+    extracted_count: int
+    extracted_pose_error_rel: float
+    steps: list[Step] = field(default_factory=list)
+    front: dict[int, Layout] = field(default_factory=dict)
+    evaluations: int = 0
+    unsolved: int = 0
+    screened: int = 0
+    route_evaluations: int = 0
+
+    @property
+    def tendons(self) -> list[Tendon]:
+        return self.layout.tendons()
+
+    @property
+    def realizable(self) -> RealizableResult:
+        return self.layout.realizable
+
+    def as_json(self) -> dict:
+        return {"extracted_count": self.extracted_count,
+                "extracted_realizable_pose_error_rel": self.extracted_pose_error_rel,
+                "steps": [s.as_json() for s in self.steps], "evaluations": self.evaluations,
+                "unsolved": self.unsolved, "screened": self.screened,
+                "route_evaluations": self.route_evaluations}
+
+
+class Candidate(NamedTuple):
+    """A layout to try: the ``action`` that made it, the indices of the routes it
+    acted on, its ``routes`` and the contractions (P, T) to start its solve from."""
+
+    action: str
+    ids: tuple[int, ...]
+    routes: list[Route]
+    start: np.ndarray
+
 
 class _Search:
-    """Solves candidate layouts on the realizable robot, counting them in ``out``."""
+    """Solves and ranks layouts on the as-built robot, counting them in ``out``."""
 
-    def __init__(self, problem, state, settings, solver, out: Consolidation, bridges: Bridges,
-                 options: ConsolidationSettings):
-        self.args = (problem, state, settings, solver)
-        self.out, self.bridges = out, bridges
-        self.rounds, self.screen = options.refine, options.screen
+    def __init__(self, problem: Problem, state: IdealizedState, settings: OptimizeSettings, solver: str,
+                 options: ConsolidationSettings, route_settings: RouteSettings, source: str,
+                 log: Callable[[str], None] | None):
+        self.problem, self.state, self.settings, self.solver = problem, state, settings, solver
+        self.options, self.rs, self.source = options, route_settings, source
+        self.log = log or (lambda text: None)
+        self.out: Consolidation | None = None
 
-    def best(self, candidates, starts=None) -> Candidate | None:
-        """The candidate with the lowest realizable pose error, or None; ``starts``
-        (one (P, T) array or None per candidate) warm starts their solves."""
-        problem, state, settings, solver = self.args
-        best = None
-        candidates = list(candidates)
-        for (action, ids, tendons), start in zip(candidates, starts or [None] * len(candidates)):
+    # ------------------------------------------------------------ solving and ranking
+    def cost(self, routes: list[Route], error: float) -> float:
+        """The as-built pose error (fraction of L) squared plus the friction price of
+        the routes' bends."""
+        mu = self.rs.friction
+        lost = sum(1.0 - np.exp(-mu * turn_angles(r.waypoints).sum()) for r in routes)
+        return error ** 2 + self.rs.friction_price * lost
+
+    def solve(self, routes: list[Route], start=None, near: Layout | None = None) -> Layout | None:
+        """The as-built robot of ``routes`` (its contractions solved from ``start``
+        (P, T) where given, its equilibria from those of the ``near`` layout), or None
+        when it cannot be solved."""
+        tendons = [r.tendon() for r in routes]
+        if self.out is not None:
             self.out.evaluations += 1
-            try:
-                r = solve_realizable_poses(problem, tendons, state, settings, solver, start)
-            except ConvergenceError:  # a layout whose robot cannot be solved is not proven: skip it
+        try:
+            real = solve_realizable_poses(self.problem, tendons, self.state, self.settings, self.solver, start,
+                                          None if near is None else positions(near.realizable))
+        except ConvergenceError:  # a layout whose robot cannot be solved is not proven: skip it
+            if self.out is not None:
                 self.out.unsolved += 1
-                continue
-            if best is None or r.pose_error_rel < best.realizable.pose_error_rel:
-                best = Candidate(action, ids, tendons, r)
+            return None
+        return Layout(routes, real, self.cost(routes, real.pose_error_rel), self.source)
+
+    def start_ratios(self, routes: list[Route], tensions: np.ndarray) -> np.ndarray:
+        """Contractions (P, T) that give each route its tension in each pose, ``tensions`` (P, T) N."""
+        tendons = [r.tendon() for r in routes]
+        states = self.state.poses or [self.state]
+        return np.array([warm_ratios(self.problem, tendons, st, t) for st, t in zip(states, tensions)])
+
+    def best(self, candidates: list[Candidate], now: Layout) -> tuple[Candidate, Layout] | None:
+        """The candidate of least cost, solved in full (after the screen)."""
+        if self.options.screen and len(candidates) > self.options.screen:
+            candidates = self._screened(candidates, now)
+        best = None
+        for c in candidates:
+            lay = self.solve(c.routes, c.start, now)
+            if lay is not None and (best is None or lay.cost < best[1].cost):
+                best = (c, lay)
         return best
 
-    def refine(self, tendons: list[Tendon], real: RealizableResult) -> list[Candidate]:
-        """Trims and extensions of ``tendons`` (solved as ``real``), the best each
-        round, while each lowers the pose error enough (module docstring)."""
-        chain = []
-        for _ in range(self.rounds if tendons else 0):
-            now = real.pose_error_rel
-            need = min((1.0 - REFINE_GAIN) * now, now - REFINE_FLOOR)
-            candidates = list(_refinements(tendons, self.bridges))
-            if self.screen:
-                candidates, starts = self._screened(candidates, real, need)
-            else:
-                starts = [real.ratios] * len(candidates)
-            c = self.best(candidates, starts)
-            if c is None or c.error > need:
-                break
-            chain.append(c)
-            tendons, real = c.tendons, c.realizable
-        return chain
-
-    def _screened(self, candidates: list, real: RealizableResult, need: float) -> tuple[list, list]:
-        """The candidates worth a full solve, and their predicted contractions: the
-        ``screen`` best by :func:`predict_realizable` from ``real``, each predicted
-        within ``SCREEN_MARGIN`` of ``need``."""
-        problem, _, settings, solver = self.args
-        positions = [real.x] if real.poses is None else [p.x for p in real.poses]
-        scored = []  # (predicted error, predicted ratios, candidate)
+    def _screened(self, candidates: list[Candidate], now: Layout) -> list[Candidate]:
+        """The ``screen`` candidates of least cost as one Gauss-Newton step predicts
+        them from the current layout's solution, each with its predicted contractions."""
+        scored = []
         for c in candidates:
             self.out.screened += 1
             try:
-                error, ratios = predict_realizable(problem, c[2], settings, real.ratios, positions, solver)
+                error, ratios = predict_realizable(self.problem, [r.tendon() for r in c.routes], self.settings,
+                                                   c.start, positions(now.realizable), self.solver)
             except ConvergenceError:
                 self.out.unsolved += 1
                 continue
-            scored.append((error, ratios, c))
+            scored.append((self.cost(c.routes, error), c._replace(start=ratios)))
         scored.sort(key=lambda s: s[0])
-        kept = [(c, ratios) for error, ratios, c in scored[:self.screen] if error <= (1.0 + SCREEN_MARGIN) * need]
-        return [c for c, _ in kept], [ratios for _, ratios in kept]
+        return [c for _, c in scored[:self.options.screen]]
+
+    # ------------------------------------------------------------ candidates
+    def reductions(self, now: Layout) -> list[Candidate]:
+        """Every drop and every join of the current layout."""
+        routes, start = now.routes, np.atleast_2d(now.realizable.ratios).reshape(self.problem.n_poses, -1)
+        out = []
+        for i in range(len(routes)):
+            out.append(Candidate("drop", (i,), routes[:i] + routes[i + 1:], np.delete(start, i, axis=1)))
+        reach = self.options.gap * self.problem.size
+        clearance = self.rs.clearance
+        for i in range(len(routes)):
+            for j in range(i + 1, len(routes)):
+                rest = [r for k, r in enumerate(routes) if k not in (i, j)]
+                rest_start = np.delete(start, [i, j], axis=1)
+                for joined in self.joins(routes[i], routes[j], reach, clearance):
+                    s = np.concatenate([rest_start, 0.5 * (start[:, [i]] + start[:, [j]])], axis=1)
+                    out.append(Candidate("join", (i, j), rest + [joined], s))
+        return out
+
+    def joins(self, a: Route, b: Route, reach: float, clearance: float) -> list[Route]:
+        """Every smooth join of ``a`` and ``b`` end to end (either end of each) whose
+        ends are within ``reach`` and that keeps the clearance."""
+        out = []
+        for a2 in (a, a.reversed()):  # a2 ends at the joint
+            for b2 in (b, b.reversed()):  # b2 starts there
+                if np.linalg.norm(a2.control[-1] - b2.control[0]) > reach:
+                    continue
+                joined = keep_clear(join_routes(a2, b2, self.problem.size), self.problem.walls, clearance)
+                if joined is not None:
+                    out.append(joined)
+        return out
+
+    # ------------------------------------------------------------ routes
+    def orient(self, now: Layout) -> tuple[Layout, list[int]]:
+        """Each route pulled at the end that serves the pose at least cost."""
+        flipped = []
+        for i in range(now.count):
+            routes = list(now.routes)
+            routes[i] = routes[i].reversed()
+            lay = self.solve(routes, np.atleast_2d(now.realizable.ratios).reshape(self.problem.n_poses, -1), now)
+            if lay is not None and lay.cost < now.cost:
+                now, flipped = lay, flipped + [i]
+        return now, flipped
+
+    def finish(self, now: Layout) -> tuple[Layout, list[Step]]:
+        """The layout oriented and its routes optimized, and the steps that took."""
+        steps = []
+        now, flipped = self.orient(now)
+        if flipped:
+            steps.append(Step("orient", tuple(flipped), now.count, now.error))
+        done = self.optimize(now)
+        if done is not now:
+            steps.append(Step("route", tuple(range(done.count)), done.count, done.error))
+        return replace(done, optimized=True), steps
+
+    def optimize(self, now: Layout) -> Layout:
+        """The layout's routes and contractions optimized together, at most
+        ``refine`` rounds, while a round lowers the cost; each round starts from the
+        routes resampled for their length and made to keep the clearance."""
+        for k in range(self.options.refine if now.routes else 0):
+            size = self.problem.size
+            routes = [Route(r.control, sample_count(r.length, size), r.tension, r.tension_std, r.source)
+                      for r in now.routes]
+            routes = [keep_clear(r, self.problem.walls, self.rs.clearance) or r for r in routes]
+            real = now.realizable
+            self.log(f"{self.source}: optimizing {len(routes)} route(s), round {k + 1}")
+            res = optimize_routes(self.problem, routes, np.atleast_2d(real.ratios).reshape(self.problem.n_poses, -1),
+                                  self.settings, self.rs, self.solver, positions(real))
+            self.out.route_evaluations += res.evaluations
+            cleared = [keep_clear(r, self.problem.walls, self.rs.clearance) for r in res.routes]
+            if any(r is None for r in cleared):
+                break
+            lay = self.solve(cleared, res.ratios, now)
+            if lay is None or lay.cost >= now.cost * (1.0 - 1e-3):
+                break
+            now = lay
+        return now
+
+
+def positions(real: RealizableResult) -> list[np.ndarray]:
+    """Each pose's equilibrium (n, 2) of a solved robot."""
+    return [real.x] if real.poses is None else [p.x for p in real.poses]
+
+
+def extracted_routes(problem: Problem, tendons: list[Tendon], state: IdealizedState, clearance: float,
+                     source: str = "") -> tuple[list[Route], np.ndarray]:
+    """Each extracted tendon as a smooth route that keeps ``clearance`` (m) from the
+    walls - a tendon that cannot (it runs where the body is narrower) is left out -
+    and the routes' tensions in each pose (P, T), N, from their tendons' fibers."""
+    routes, tensions = [], []
+    states = state.poses or [state]
+    for t in tendons:
+        r = keep_clear(fit_route(t.waypoints, problem.size, t.tension, t.tension_std, source), problem.walls,
+                       clearance)
+        if r is not None:
+            routes.append(r)
+            tensions.append([pose_tension(st, t) for st in states])
+    return routes, np.array(tensions).reshape(len(routes), len(states)).T
 
 
 def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings: OptimizeSettings,
-                real: RealizableResult, options: ConsolidationSettings, solver: str = "auto") -> Consolidation:
-    """Greedy drops and joins, helped by refinement, then refinement of what is
-    left (module docstring), from ``tendons``, whose realizable robot ``real`` is
-    already solved."""
-    base = real.pose_error_rel
-    out = Consolidation(list(tendons), real, len(tendons), base)
+                options: ConsolidationSettings, solver: str = "auto", source: str = "",
+                log: Callable[[str], None] | None = None) -> Consolidation:
+    """Routes from an extractor's ``tendons``, then greedy drops and smooth joins,
+    then orientation and route optimization (module docstring). With consolidation
+    off (``options.enabled`` false), the fitted routes as they are."""
+    rs = route_settings(problem, options)
+    search = _Search(problem, state, settings, solver, options, rs, source, log)
+    routes, tensions = extracted_routes(problem, tendons, state, rs.clearance, source)
+    first = search.solve(routes, search.start_ratios(routes, tensions))
+    if first is None:
+        raise ConvergenceError(f"the as-built robot of {source or 'the'} tendons cannot be solved")
+    out = Consolidation(first, len(tendons), first.error)
+    search.out = out
+    out.front[first.count] = first
     if not options.enabled:
         return out
-    search = _Search(problem, state, settings, solver, out, Bridges(problem, state, options.gap), options)
-    bound = max(base + options.tolerance, options.budget)
-    while True:
-        while out.tendons:
-            c = search.best(_reductions(out.tendons, search.bridges))
-            if c is None:
+    bound = max(first.error + options.tolerance, options.budget)
+    now = first
+    while now.routes:
+        found = search.best(search.reductions(now), now)
+        if found is None:
+            break
+        cand, lay = found
+        if lay.error > bound:
+            if lay.error > REACH * bound:  # too far for route optimization to bring it within
                 break
-            chain = [c] + (search.refine(c.tendons, c.realizable) if c.error > bound else [])
-            if chain[-1].error > bound:
+            lay = search.optimize(lay)
+            if lay.error > bound:
                 break
-            _accept(out, chain)
-        polish = search.refine(out.tendons, out.realizable)
-        _accept(out, polish)
-        if not polish:
-            return out
+        now = lay
+        out.steps.append(Step(cand.action, cand.ids, now.count, now.error))
+        out.front[now.count] = now
+        search.log(f"{source}: {cand.action} -> {now.count} tendon(s), as built {100 * now.error:.2f}% of L")
+    done, steps = search.finish(now)
+    out.steps += steps
+    out.layout = done
+    out.front[done.count] = done
+    return out
 
 
-def _accept(out: Consolidation, chain: list[Candidate]) -> None:
-    for c in chain:
-        out.tendons, out.realizable = c.tendons, c.realizable
-        out.steps.append(Step(c.action, c.ids, len(c.tendons), c.error))
+def finish(problem: Problem, layout: Layout, state: IdealizedState, settings: OptimizeSettings,
+           options: ConsolidationSettings, solver: str = "auto", log=None) -> Layout:
+    """A layout consolidation passed through, oriented and its routes optimized
+    as a consolidated one's are."""
+    search = _Search(problem, state, settings, solver, options, route_settings(problem, options), layout.source,
+                     log)
+    search.out = Consolidation(layout, layout.count, layout.error)
+    return search.finish(layout)[0]
 
 
-def _reductions(tendons: list[Tendon], bridges: Bridges):
-    """(action, tendon indices, tendon list) for every drop and every join."""
-    for i in range(len(tendons)):
-        yield "drop", (i,), tendons[:i] + tendons[i + 1:]
-    for i in range(len(tendons)):
-        for j in range(i + 1, len(tendons)):
-            rest = [t for k, t in enumerate(tendons) if k not in (i, j)]
-            for joined in bridges.joins(tendons[i], tendons[j]):
-                yield "join", (i, j), rest + [joined]
-
-
-def _refinements(tendons: list[Tendon], bridges: Bridges):
-    """(action, (tendon index,), tendon list) for every trim and every extension
-    of either end of every tendon (module docstring)."""
-    view, state = bridges.view, bridges.state
-    used = {int(v) for t in tendons for v in t.nodes}
-    for i, t in enumerate(tendons):
-        for nodes, fibers in ((list(t.nodes), list(t.fibers)), (list(t.nodes[::-1]), list(t.fibers[::-1]))):
-            start, last, f_in = int(nodes[0]), int(nodes[-1]), int(fibers[-1])  # this pass edits the last end
-            if len(fibers) > 1:
-                yield "trim", (i,), tendons[:i] + [view.tendon(start, fibers[:-1], state)] + tendons[i + 1:]
-            for f in (int(f) for f in view.incident(last)):
-                if f != f_in and view.other(f, last) not in used and view.turn(f_in, last, f) <= MAX_TURN + 1e-9:
-                    yield "extend", (i,), tendons[:i] + [view.tendon(start, fibers + [f], state)] + tendons[i + 1:]
+def route_settings(problem: Problem, options: ConsolidationSettings) -> RouteSettings:
+    """The route optimization's settings: the scene's [tendons] table, and the budget
+    squared as the price of the pull lost to friction (:mod:`.routing`)."""
+    ts = problem.scene.tendons
+    price = options.budget ** 2 if options.budget > 0 else RouteSettings.friction_price
+    return RouteSettings(friction=ts.friction, clearance=ts.clearance * problem.size, friction_price=price)

@@ -64,7 +64,9 @@ class Tendon:
     """A tendon: a path through fiber nodes ``nodes`` (k,) along fibers ``fibers``
     (k-1,), rest ``waypoints`` (k, 2) m, anchored at the first waypoint and pulled
     at the last; ``tension`` and ``tension_std`` (N) of its active source fibers.
-    ``contraction`` (m) is set when the realizable robot is solved."""
+    ``contraction`` (m) is set when the realizable robot is solved. A smooth
+    route off the lattice (what consolidation makes of an extractor's tendons)
+    has no ``nodes`` or ``fibers`` and its spline's ``control`` points (m, 2)."""
 
     nodes: np.ndarray
     fibers: np.ndarray
@@ -72,6 +74,12 @@ class Tendon:
     tension: float
     tension_std: float
     contraction: float | None = None
+    control: np.ndarray | None = None
+
+    @property
+    def on_lattice(self) -> bool:
+        """The waypoints are fiber nodes (an extractor's tendon, not a smooth route)."""
+        return len(self.nodes) == len(self.waypoints)
 
     @property
     def length(self) -> float:
@@ -91,10 +99,14 @@ class Tendon:
         return turn_angles(self.waypoints)
 
     def as_json(self) -> dict:
-        return {"waypoints": self.waypoints.tolist(), "length": self.length, "tension": self.tension,
-                "tension_std": self.tension_std, "contraction": self.contraction,
-                "anchor": self.anchor.tolist(), "pull_end": self.pull_end.tolist(),
-                "fiber_nodes": [int(v) for v in self.nodes], "fibers": [int(f) for f in self.fibers]}
+        out = {"waypoints": self.waypoints.tolist(), "length": self.length, "tension": self.tension,
+               "tension_std": self.tension_std, "contraction": self.contraction,
+               "anchor": self.anchor.tolist(), "pull_end": self.pull_end.tolist()}
+        if self.control is not None:
+            out["control_points"] = self.control.tolist()
+        if self.on_lattice:
+            out.update(fiber_nodes=[int(v) for v in self.nodes], fibers=[int(f) for f in self.fibers])
+        return out
 
 
 def turn_angles(points: np.ndarray) -> np.ndarray:

@@ -45,20 +45,29 @@ class RealizableResult:
     poses: list["RealizableResult"] | None = None
 
 
+def deformed_waypoints(problem: Problem, tendons: list[Tendon], x: np.ndarray) -> list[np.ndarray]:
+    """Each tendon's waypoints (k, 2) where node positions ``x`` (n, 2) put them."""
+    return [problem.embed_waypoints(t.nodes, t.waypoints).positions(problem.mesh.triangles, x) for t in tendons]
+
+
 def tendon_cables(problem: Problem, tendons: list[Tendon]) -> CableSet:
-    """Tendons as many-segment cables through their fiber nodes (embedded exactly as
-    the fiber nodes are), with the scene's fiber stiffness as EA."""
-    emb = problem.fibers.embedding
-    ids = np.concatenate([t.nodes for t in tendons]).astype(np.int64)
+    """Tendons as many-segment cables through their waypoints
+    (:meth:`~tendon_taichi.body.problem.Problem.embed_waypoints`), with the scene's
+    fiber stiffness as EA and its tendon friction."""
+    tri, bary = [], []
     segs, start, base = [], [0], 0
     for t in tendons:
-        k = len(t.nodes)
+        e = problem.embed_waypoints(t.nodes, t.waypoints)
+        tri.append(e.tri)
+        bary.append(e.bary)
+        k = len(t.waypoints)
         segs.append(base + np.stack([np.arange(k - 1), np.arange(1, k)], axis=1))
         start.append(start[-1] + k - 1)
         base += k
     a0 = np.array([t.length for t in tendons])
-    return CableSet(Embedding(emb.tri[ids], emb.bary[ids]), np.concatenate(segs),
-                    np.array(start, dtype=np.int64), a0, np.full(len(tendons), problem.scene.fibers.stiffness))
+    return CableSet(Embedding(np.concatenate(tri).astype(np.int64), np.concatenate(bary)), np.concatenate(segs),
+                    np.array(start, dtype=np.int64), a0, np.full(len(tendons), problem.scene.fibers.stiffness),
+                    problem.scene.tendons.friction)
 
 
 def warm_ratios(problem: Problem, tendons: list[Tendon], state: IdealizedState,
@@ -68,12 +77,11 @@ def warm_ratios(problem: Problem, tendons: list[Tendon], state: IdealizedState,
     (Z'(e) = tau / EA)."""
     fs = problem.scene.fibers
     EA, eps = fs.stiffness, fs.eps
-    c = problem.fibers.embedding.positions(problem.mesh.triangles, state.x) if state.x is not None \
-        else problem.fibers.nodes
+    x = problem.mesh.nodes if state.x is None else state.x
     tensions = [t.tension for t in tendons] if tensions is None else tensions
     out = []
-    for t, tension in zip(tendons, tensions):
-        L = float(np.linalg.norm(np.diff(c[t.nodes], axis=0), axis=1).sum())
+    for t, tension, points in zip(tendons, tensions, deformed_waypoints(problem, tendons, x)):
+        L = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
         z1 = max(tension, 0.0) / EA
         e = z1 + 0.5 * eps if z1 >= 0.5 * eps else np.sqrt(2.0 * eps * z1)
         out.append((t.length - L / (1.0 + e)) / t.length)
@@ -81,23 +89,27 @@ def warm_ratios(problem: Problem, tendons: list[Tendon], state: IdealizedState,
 
 
 def solve_realizable_poses(problem: Problem, tendons: list[Tendon], state: IdealizedState,
-                           settings: OptimizeSettings, solver: str = "auto", ratios=None) -> RealizableResult:
+                           settings: OptimizeSettings, solver: str = "auto", ratios=None,
+                           positions=None) -> RealizableResult:
     """The realizable robot in every target pose: one layout, its tendon contractions
     re-solved per pose (warm started from ``ratios`` (P, T) c / L0 where given, else
-    from each tendon's mean tension in that pose).
+    from each tendon's tension in that pose; its equilibria from ``positions``, each
+    pose's (n, 2), where given, else from rest).
     With several poses the result's pose errors cover every pose's targets,
     ``contraction``, ``ratios`` and ``tau`` are (P, T), ``x`` is the first pose's
     and ``poses`` holds each pose's result."""
     if ratios is not None:
         ratios = np.asarray(ratios, dtype=float).reshape(problem.n_poses, len(tendons))
+    warm = [None] * problem.n_poses if positions is None else list(positions)
     if problem.n_poses == 1:
-        return solve_realizable(problem, tendons, state, settings, solver, start=None if ratios is None else ratios[0])
+        return solve_realizable(problem, tendons, state, settings, solver, start=None if ratios is None else ratios[0],
+                                positions=warm[0])
     t0 = time.perf_counter()
     res = []
     for i, st in enumerate(state.poses):
-        tensions = [float(st.tau[t.fibers].mean()) for t in tendons]
+        tensions = [pose_tension(st, t) for t in tendons]
         res.append(solve_realizable(problem.pose(i), tendons, st, settings, solver, tensions,
-                                    None if ratios is None else ratios[i]))
+                                    None if ratios is None else ratios[i], warm[i]))
     err = np.array([r.pose_error for r in res])
     pe = float(np.sqrt((err ** 2).sum()))
     shape = (len(res), len(tendons))
@@ -108,11 +120,18 @@ def solve_realizable_poses(problem: Problem, tendons: list[Tendon], state: Ideal
                             sum(r.evaluations for r in res), time.perf_counter() - t0, res)
 
 
+def pose_tension(state: IdealizedState, tendon: Tendon) -> float:
+    """A tendon's tension in one pose: the mean of its fibers' there (a route, which
+    has none, keeps its strand's tension)."""
+    return float(state.tau[tendon.fibers].mean()) if len(tendon.fibers) else tendon.tension
+
+
 def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedState,
                      settings: OptimizeSettings, solver: str = "auto", tensions=None,
-                     start=None) -> RealizableResult:
+                     start=None, positions=None) -> RealizableResult:
     """Solve the realizable robot's tendon contractions for the problem's targets
-    (one pose), warm started from ``start`` (T,) c / L0, or else :func:`warm_ratios`."""
+    (one pose), warm started from ``start`` (T,) c / L0, or else :func:`warm_ratios`,
+    its equilibria from ``positions`` (n, 2) where given, else from rest."""
     t0 = time.perf_counter()
     L = problem.size
     if not tendons:  # the bare body (it sags under gravity, if any)
@@ -122,7 +141,7 @@ def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedSt
                                 0, 0, time.perf_counter() - t0)
     ik = SoftIK(problem, settings, solver, cables=tendon_cables(problem, tendons))
     r0 = warm_ratios(problem, tendons, state, tensions) if start is None else np.asarray(start, dtype=float)
-    st = run_stage(ik, 0, r0, RunCallbacks())
+    st = run_stage(ik, 0, r0, RunCallbacks(), warm=None if positions is None else [positions])
     f = st.figures
     return RealizableResult(st.ac, st.r, st.tau, st.x, f.pose_error, f.pose_error_rel, f.pose_error_max,
                             st.iterations, st.evaluations, time.perf_counter() - t0)
@@ -165,4 +184,4 @@ def target_jacobian(ps: PoseSolve, a0: np.ndarray) -> np.ndarray:
             b[ps.problem.fixed] = 0.0
             yield b
 
-    return np.stack([-ps.problem.target_positions(dx) for dx in ps.linear.solve_many(rhs(), ADJOINT_TOL)], axis=-1)
+    return np.stack([-ps.problem.target_positions(dx) for dx in ps.sensitivities(rhs(), ADJOINT_TOL)], axis=-1)

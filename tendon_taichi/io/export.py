@@ -1,6 +1,6 @@
-"""Writing results: the problem export (``.npz``, ``docs/formats.md``), VTU files
-for ParaView and the fabrication drawing (SVG). Every file is written
-atomically (:func:`~tendon_taichi.files.atomic_path`)."""
+"""Writing results: the problem export (``.npz``, ``docs/formats.md``) and VTU
+files for ParaView (the fabrication drawing is :mod:`.drawing`). Every file is
+written atomically (:func:`~tendon_taichi.files.atomic_path`)."""
 
 from __future__ import annotations
 
@@ -84,43 +84,4 @@ def write_vtu(path: str | Path, problem: Problem, x: np.ndarray, tau: np.ndarray
     )
     with atomic_path(path) as tmp:
         meshio.write(str(tmp), mesh, file_format="vtu")
-    return Path(path)
-
-
-def write_svg(path: str | Path, problem: Problem, tendons, title: str = "") -> Path:
-    """An SVG drawing in millimetres (1 user unit = 1 mm, y up as in the scene) of the
-    body outline (rest shape, holes included) and the tendons: each a polyline with
-    its anchor (circle) and pull end (square), numbered in the order given."""
-    mm = 1000.0
-    lo, hi = problem.mesh.nodes.min(axis=0) * mm, problem.mesh.nodes.max(axis=0) * mm
-    pad = 0.05 * float(np.max(hi - lo)) + 2.0
-    w, h = hi - lo + 2 * pad
-
-    def pt(p):
-        return f"{(p[0] * mm - lo[0] + pad):.3f},{(hi[1] - p[1] * mm + pad):.3f}"
-
-    lines = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w:.2f}mm" height="{h:.2f}mm" '
-             f'viewBox="0 0 {w:.3f} {h:.3f}">',
-             f"<title>{title or problem.scene.name}: {len(tendons)} tendon(s)</title>",
-             '<g fill="none" stroke="#444" stroke-width="0.3">']
-    X = problem.mesh.nodes
-    for a, b in problem.mesh.boundary_edges:
-        (x1, y1), (x2, y2) = pt(X[a]).split(","), pt(X[b]).split(",")
-        lines.append(f'<line x1="{x1}" y1="{y1}" x2="{x2}" y2="{y2}"/>')
-    lines.append("</g>")
-    colors = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"]
-    for i, t in enumerate(tendons):
-        c = colors[i % len(colors)]
-        pts = " ".join(pt(p) for p in t.waypoints)
-        ax, ay = pt(t.anchor).split(",")
-        px, py = (float(v) for v in pt(t.pull_end).split(","))
-        lines += [f'<g stroke="{c}" fill="none" stroke-width="0.8">',
-                  f'<polyline points="{pts}" stroke-linejoin="round"/>',
-                  f'<circle cx="{ax}" cy="{ay}" r="1.2" fill="{c}"/>',
-                  f'<rect x="{px - 1.2:.3f}" y="{py - 1.2:.3f}" width="2.4" height="2.4" fill="{c}"/>',
-                  f'<text x="{ax}" y="{float(ay) - 2:.3f}" font-size="3" fill="{c}" stroke="none">{i + 1}</text>',
-                  "</g>"]
-    lines.append("</svg>")
-    with atomic_path(path) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
     return Path(path)

@@ -115,9 +115,8 @@ def compare_figure(extraction):
         x = r.realizable.x
         ax.triplot(p.mesh.nodes[:, 0], p.mesh.nodes[:, 1], T, color="0.88", lw=0.4)
         ax.triplot(x[:, 0], x[:, 1], T, color="0.72", lw=0.4)
-        c = p.fibers.embedding.positions(T, x)
         for i, t in enumerate(r.tendons):
-            path_xy = c[t.nodes]
+            path_xy = p.embed_waypoints(t.nodes, t.waypoints).positions(T, x)
             ax.plot(path_xy[:, 0], path_xy[:, 1], color=colors[i % len(colors)], lw=2.2)
             ax.plot(*path_xy[0], "o", color=colors[i % len(colors)], ms=4)
             ax.plot(*path_xy[-1], "s", color=colors[i % len(colors)], ms=4)
@@ -338,8 +337,93 @@ def story_figure(problem: Problem, planted: dict | None, stage0, final, extracto
     ax = axes[4]
     x = extractor.realizable.x
     frame(ax, x, f"5. realizable robot (only those tendons)\npose {100 * m['realizable_pose_error_rel']:.2f}% of L")
-    c = problem.fibers.embedding.positions(T, x)
     for i, t in enumerate(extractor.tendons):
-        ax.plot(c[t.nodes][:, 0], c[t.nodes][:, 1], color=colors[i % len(colors)], lw=2.2)
+        w = problem.embed_waypoints(t.nodes, t.waypoints).positions(T, x)
+        ax.plot(w[:, 0], w[:, 1], color=colors[i % len(colors)], lw=2.2)
+    fig.tight_layout()
+    return fig
+
+
+def _frame(ax, problem: Problem, x, title: str, pose: Problem | None = None) -> None:
+    """The rest mesh (and the deformed one at ``x``), the goals and (at ``x``) the targets."""
+    T, X = problem.mesh.triangles, problem.mesh.nodes
+    ax.triplot(X[:, 0], X[:, 1], T, color="0.88", lw=0.4)
+    if x is not None:
+        ax.triplot(x[:, 0], x[:, 1], T, color="0.72", lw=0.4)
+    pose = pose or problem.pose(0)
+    goal = pose.target_goal
+    ax.scatter(goal[:, 0], goal[:, 1], s=40, marker="x", color="tab:green", zorder=5)
+    if x is not None:
+        now = pose.target_positions(x)
+        ax.scatter(now[:, 0], now[:, 1], s=18, color="tab:blue", zorder=5)
+    ax.set_title(title, fontsize=9)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def _routes(ax, paths: list[np.ndarray]) -> None:
+    """Each path (k, 2) in its colour, its anchor a circle, its pull end a square."""
+    colors = palette()
+    for i, w in enumerate(paths):
+        c = colors[i % len(colors)]
+        ax.plot(w[:, 0], w[:, 1], color=c, lw=2.2, solid_capstyle="round")
+        ax.plot(*w[0], "o", color=c, ms=5)
+        ax.plot(*w[-1], "s", color=c, ms=5)
+        ax.annotate(str(i + 1), w[0], textcoords="offset points", xytext=(3, 3), fontsize=8, color=c)
+
+
+def plot_design(path: str | Path, problem: Problem, tendons, real, title: str) -> Path:
+    """:func:`design_figure` as a PNG."""
+    return save_png(design_figure(problem, tendons, real, title), path, 120)
+
+
+def design_figure(problem: Problem, tendons, real, title: str):
+    """The routes in the rest body (anchor circle, pull end square) beside the as-built
+    robot in each pose (``real`` its solved realizable result): what to build and
+    what it does."""
+    poses = [real] if real.poses is None else real.poses
+    fig = new_figure(figsize=(4.4 * (1 + len(poses)), 4.4))
+    axes = fig.subplots(1, 1 + len(poses), squeeze=False)[0]
+    _frame(axes[0], problem, None, f"{len(tendons)} route(s) at rest\n(circle: anchor, square: pull end)")
+    _routes(axes[0], [t.waypoints for t in tendons])
+    T = problem.mesh.triangles
+    names = problem.pose_names
+    for i, (ax, r) in enumerate(zip(axes[1:], poses)):
+        label = f" '{names[i]}'" if len(poses) > 1 else ""
+        _frame(ax, problem, r.x, f"as built{label}: pose error {100 * r.pose_error_rel:.2f}% of L\n"
+                                 f"(blue: targets, green: goals)", problem.pose(i))
+        _routes(ax, [problem.embed_waypoints(t.nodes, t.waypoints).positions(T, r.x) for t in tendons])
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_front(path: str | Path, front: list[dict], budget: float, chosen: int, name: str) -> Path:
+    """:func:`front_figure` as a PNG."""
+    return save_png(front_figure(front, budget, chosen, name), path, 110)
+
+
+def front_figure(front: list[dict], budget: float, chosen: int, name: str, series: dict | None = None):
+    """As-built pose error (% of L) against tendon count, a point per count (one
+    line per level when ``series`` maps labels to fronts), the budget dashed and
+    the recommended count ringed."""
+    fig = new_figure(figsize=(5.0, 3.6))
+    ax = fig.subplots()
+    for label, rows in (series or {name: front}).items():
+        k = [r["count"] for r in rows]
+        e = [100 * r["realizable_pose_error_rel"] for r in rows]
+        ax.plot(k, e, "o-", label=label)
+    pick = [r for r in front if r["count"] == chosen]
+    if pick:
+        ax.plot(chosen, 100 * pick[0]["realizable_pose_error_rel"], "o", ms=14, mfc="none", mec="tab:red",
+                label=f"recommended: {chosen}")
+    ax.axhline(100 * budget, ls="--", color="0.5", label=f"budget {100 * budget:g}%")
+    ax.set_xlabel("tendons")
+    ax.set_ylabel("as-built pose error (% of L)")
+    ax.set_xticks(sorted({r["count"] for r in front} | {chosen}))
+    ax.set_yscale("log")
+    ax.legend(fontsize=8)
+    ax.set_title(f"{name}: what each tendon buys", fontsize=9)
     fig.tight_layout()
     return fig

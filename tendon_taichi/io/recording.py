@@ -38,6 +38,7 @@ from ..body.mesh import Embedding, Mesh
 from ..body.problem import Problem
 from ..body.scene import parse_scene
 from ..errors import TendonError
+from ..files import locked, replace_with_bytes
 from ..objective.settings import OptimizeSettings, settings_dict, settings_from_dict
 
 APP_ID = "tendon_taichi"
@@ -54,7 +55,7 @@ def default_blueprint():
     import rerun.blueprint as rrb
 
     return rrb.Blueprint(rrb.Horizontal(
-        rrb.Spatial2DView(origin="/", name="body", contents=["/world/**", "/tendons/**"]),
+        rrb.Spatial2DView(origin="/", name="body", contents=["/world/**", "/tendons/**", "/design/**"]),
         rrb.Vertical(rrb.TimeSeriesView(origin="/metrics/objective", name="objective terms"),
                      rrb.TimeSeriesView(origin="/metrics/figures", name="pose error, active fibers")),
         column_shares=[3, 2]))
@@ -362,3 +363,33 @@ def completed_chunks(path: str | Path, stages: int):
         if vals and max(vals) < stages:
             keep.append(ch)
     return keep
+
+
+def chunk_at_stage(chunk, stage: int) -> bool:
+    """Whether a chunk holds rows at ``stage`` of the stage timeline."""
+    return "stage" in chunk.timeline_names and stage in chunk.to_record_batch().column("stage").to_pylist()
+
+
+def rewrite(path: str | Path, run_id: str | None, keep, add, on_wait=None) -> None:
+    """Rewrite a recording with the chunks ``keep(chunk)`` accepts, then what
+    ``add(rr, stream)`` logs. rerun files cannot be appended to, so the file is
+    rewritten, under a lock (``on_wait`` is called while another writer holds it)
+    and from what it holds then, so that concurrent writers all keep what they
+    add; the new file replaces the old atomically. Raises OSError when it cannot
+    be written (the original is then unchanged)."""
+    import rerun as rr
+
+    path = Path(path)
+    with locked(path, on_wait):
+        chunks, _ = read_chunks(path)
+        rec = rr.RecordingStream(APP_ID, recording_id=run_id)
+        memory = rec.memory_recording()
+        rec.send_blueprint(default_blueprint(), make_active=False, make_default=True)  # as save() does
+        try:
+            rec.send_chunks([ch for ch in chunks if keep(ch)])
+            add(rr, rec)
+            rec.flush()
+            data = memory.drain_as_bytes()
+        finally:
+            rec.disconnect()
+        replace_with_bytes(path, data)

@@ -98,13 +98,19 @@ class RunCallbacks:
     on_stage: list = field(default_factory=list)
 
 
-def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbacks) -> StageResult:
-    """Optimize one stage from ``r_start`` with L-BFGS-B (bounds [-pmax, cmax])."""
+def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbacks,
+              warm: list[np.ndarray] | None = None) -> StageResult:
+    """Optimize one stage from ``r_start`` with L-BFGS-B (bounds [-pmax, cmax]). Its
+    start and final states are solved from rest (what replay recomputes), or from
+    ``warm``, each pose's positions (n, 2) of a nearby state, where given."""
     s = ik.settings
     k = stage_k(s, stage)
     t0 = time.perf_counter()
     ik.configure(k)
-    ik.restart(r_start)
+    if warm is None:
+        ik.restart(r_start)
+    else:
+        ik.warm_start(warm)
     for cb in callbacks.on_stage_start:
         cb(stage, k)
     ev0 = ik.evaluations
@@ -127,8 +133,11 @@ def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbac
                       options={"maxiter": s.stage_iterations, "ftol": 1e-15, "gtol": 1e-12,
                                "maxcor": 10, "maxls": 40})
     r = np.clip(res.x, -fs.max_payout, fs.max_contraction)
-    # the stage's final state, solved from rest (what replay recomputes)
-    ik.restart(r)
+    # the stage's final state, solved from rest (what replay recomputes) or settled where it is
+    if warm is None:
+        ik.restart(r)
+    else:
+        ik.settle(r)
     fig = ik.figures(r)
     xs, taus = ik.state()
     message = "settled" if res.status == 99 or "StopIteration" in str(res.message) else str(res.message)

@@ -29,6 +29,7 @@ from ..objective.settings import OptimizeSettings
 from ..objective.term import State
 from ..objective.terms import registered
 from ..physics.model import Model
+from ..solve.frictional import solve_jacobian
 from ..solve.newton import Equilibrium, NewtonSolver
 
 #: relative tolerance of the adjoint solve (the gradient's accuracy)
@@ -149,10 +150,21 @@ class PoseSolve:
         return eq
 
     def adjoint(self, rhs: np.ndarray) -> np.ndarray:
-        """lambda = H^-1 dO/dx, warm started from the last one (iterative backends)."""
-        lam = self.linear.solve(rhs, tol=ADJOINT_TOL, warm=self.lambda_warm)
+        """lambda = J^-T dO/dx, J the equilibrium's Jacobian (the Hessian H, plus the
+        capstan term with friction), warm started from the last one (iterative backends)."""
+        lam = solve_jacobian(self.linear, self.model.friction_jacobian(), rhs, ADJOINT_TOL, transpose=True,
+                             warm=self.lambda_warm)
         self.lambda_warm = True
         return lam
+
+    def sensitivities(self, rhs, tol: float = ADJOINT_TOL):
+        """J^-1 b (n, 2) for each b (n, 2) of ``rhs``, at the last equilibrium."""
+        fj = self.model.friction_jacobian()
+        if fj is None:
+            yield from self.linear.solve_many(rhs, tol)
+            return
+        for b in rhs:
+            yield solve_jacobian(self.linear, fj, b, tol, transpose=False)
 
 
 class SoftIK:
@@ -184,6 +196,8 @@ class SoftIK:
         #: the last evaluated point: r, objective, gradient, evaluation, positions (P, n, 2), tensions (P, C)
         self._last: tuple[np.ndarray, float, np.ndarray, Evaluation, np.ndarray, np.ndarray] | None = None
         self.eval_tol = EVAL_TOL
+        #: each pose's adjoint lambda (n, 2) of the last evaluation
+        self.adjoints: list[np.ndarray] = []
 
     # ------------------------------------------------------------ stages
     def configure(self, k: float | None) -> None:
@@ -210,6 +224,21 @@ class SoftIK:
         ac = self.split(np.asarray(r, dtype=float) * self.a0)
         return [ps.restart(ac[i]) for i, ps in enumerate(self.poses)]
 
+    def warm_start(self, positions: list[np.ndarray]) -> None:
+        """Start from each pose's ``positions`` (n, 2) instead of rest, with cold adjoints."""
+        self._last = None
+        for ps, x in zip(self.poses, positions):
+            ps.lambda_warm, ps.pred = False, None
+            ps.linear.reset()
+            ps.model.set_positions(x)
+
+    def settle(self, r: np.ndarray) -> list[Equilibrium]:
+        """Each pose's equilibrium at ``r`` solved to the stage-state tolerance from
+        where the poses are (not from rest)."""
+        self._last = None
+        ac = self.split(np.asarray(r, dtype=float) * self.a0)
+        return [ps.state_newton.solve(ac=ac[i]) for i, ps in enumerate(self.poses)]
+
     # ------------------------------------------------------------ evaluation
     def evaluate(self, r: np.ndarray) -> tuple[float, np.ndarray]:
         """Objective and its gradient w.r.t. r at the poses' equilibria for r."""
@@ -224,12 +253,16 @@ class SoftIK:
             states.append(State(eq.x, ac[i], cabs[-1]["tau"], i))
         ev = self.objective.evaluate(states)
         grad = np.empty((len(self.poses), self.n_cables))
+        self.adjoints = []
         for i, (ps, cab) in enumerate(zip(self.poses, cabs)):
             m = ps.model
             # the whole x-derivative, through the tensions too, and one adjoint solve
             dOdx = ev.dx[i] + m.length_jacobian_product(ev.dtau[i] * cab["kc"])
+            if m.capstan is not None and np.any(ev.dtau[i]):
+                dOdx += m.friction_jacobian().tension_gradient(ev.dtau[i])
             dOdx[self.problem.fixed] = 0.0
             lam = ps.adjoint(dOdx)
+            self.adjoints.append(lam)
             grad[i] = ev.dac[i] + ev.dtau[i] * cab["tau_ac"] - m.mixed_transpose_product(lam)
         grad = grad.ravel() * self.a0
         self.evaluations += 1

@@ -4,12 +4,17 @@
 * ``E_body``: compressible Neo-Hookean constant-strain triangles,
   ``sum_e h A_e psi(F_e)`` with ``F_e = D_s D_m^-1``;
 * ``E_g = -sum_i m_i g . x_i`` with lumped masses;
-* ``U_c = EA_c a_c Z(e_c)``, ``a_c = a0_c - ac_c``, ``e_c = (L_c - a_c)/a_c``,
-  ``L_c(x)`` the length of cable ``c`` (the sum of its segment lengths).
+* ``U_c = EA_c a_c Z(e_c)``, ``a_c = rho_c (a0_c - ac_c)``, ``e_c = (L_c - a_c)/a_c``,
+  ``L_c(x) = sum_s w_s l_s`` the weighted length of cable ``c`` (the sum of its
+  segment lengths for a frictionless cable, whose weights ``w_s`` and factor
+  ``rho_c`` are 1). Capstan friction (:mod:`.capstan`) sets ``w_s = exp(-mu
+  Theta_s)`` and ``rho_c = sum_s w_s l0_s / sum_s l0_s`` from the current
+  angles and keeps them frozen inside each Newton step, so that segment ``s``
+  pulls with ``w_s tau``.
 
 Derived cable quantities (per cable, at the model's positions): tension
 ``tau = dU/dL = EA Z'(e)`` (N), ``kc = dtau/dL = EA Z''(e)/a`` (N/m) and
-``tau_ac = dtau/dac = EA Z''(e) L/a^2`` (N/m). The mixed derivative of the
+``tau_ac = dtau/dac = EA Z''(e) L rho/a^2`` (N/m). The mixed derivative of the
 energy is ``d2E/(dx dac_c) = tau_ac_c dL_c/dx``.
 
 Node forces are *gathered* per node (no atomics) and sums run over fixed
@@ -70,13 +75,14 @@ def segment_vector(fb: ti.template(), ib: ti.template(), xslot, s) -> vec2:
 
 @ti.func
 def cable_sum(fb: ti.template(), ib: ti.template(), slot, c) -> ti.f64:
-    """The sum of a per-segment value over the segments of cable c."""
+    """The sum of a per-segment value over the segments of cable c, each weighted
+    by its capstan weight (single-segment cables have none)."""
     total = 0.0
     if ib[Slot.SINGLE] != 0:
         total = get_f(fb, ib, slot, c)
     else:
         for s in range(ib[ib[Slot.CAB_START] + c], ib[ib[Slot.CAB_START] + c + 1]):
-            total += get_f(fb, ib, slot, s)
+            total += get_f(fb, ib, Slot.SEG_WT, s) * get_f(fb, ib, slot, s)
     return total
 
 
@@ -96,24 +102,27 @@ def update_cables(fb: ti.template(), ib: ti.template(), xslot, serial: ti.templa
     ti.loop_config(serialize=serial)
     for c in range(ib[Slot.C]):
         L = cable_sum(fb, ib, Slot.SEG_L, c)
-        a = get_f(fb, ib, Slot.A0, c) - get_f(fb, ib, Slot.AC, c)
+        rho = get_f(fb, ib, Slot.RHO, c)
+        a = rho * (get_f(fb, ib, Slot.A0, c) - get_f(fb, ib, Slot.AC, c))
         e = L / a - 1.0
         EA = get_f(fb, ib, Slot.EA, c)
         set_f(fb, ib, Slot.L, c, L)
         set_f(fb, ib, Slot.TAU, c, EA * zcq_d1(e, eps))
         set_f(fb, ib, Slot.KC, c, EA * zcq_d2(e, eps) / a)
-        set_f(fb, ib, Slot.TAU_AC, c, EA * zcq_d2(e, eps) * L / (a * a))
+        set_f(fb, ib, Slot.TAU_AC, c, EA * zcq_d2(e, eps) * L * rho / (a * a))
         set_f(fb, ib, Slot.CE, c, EA * a * zcq(e, eps))
 
 
 @ti.func
 def segment_vectors_along(fb: ti.template(), ib: ti.template(), coef, serial: ti.template()):
-    """SEG_VEC = w_c n_s for each segment s of cable c, w the per-cable array at
-    ``coef`` (tensions: the cable forces; any weights: sum_c w_c dL_c/dx)."""
+    """SEG_VEC = k_c w_s n_s for each segment s of cable c, k the per-cable array at
+    ``coef`` (tensions: the cable forces; any factors: sum_c k_c dL_c/dx), w_s the
+    segment's capstan weight."""
     ti.loop_config(serialize=serial)
     for s in range(ib[Slot.S]):
         c = ib[ib[Slot.SEG] + 3 * s + 2]
-        set_v(fb, ib, Slot.SEG_VEC, s, get_f(fb, ib, coef, c) * get_v(fb, ib, Slot.SEG_N, s))
+        k = get_f(fb, ib, coef, c) * get_f(fb, ib, Slot.SEG_WT, s)
+        set_v(fb, ib, Slot.SEG_VEC, s, k * get_v(fb, ib, Slot.SEG_N, s))
 
 
 # ---------------------------------------------------------------- body + cables
@@ -196,13 +205,14 @@ def element_diag_block(fb: ti.template(), ib: ti.template(), e, k) -> mat2:
 
 @ti.func
 def segment_stiffness(fb: ti.template(), ib: ti.template(), s) -> mat2:
-    """tau/l (I - n n^T) + kc n n^T of segment s alone (PSD)."""
+    """w tau/l (I - n n^T) + w^2 kc n n^T of segment s alone (PSD), w its capstan weight."""
     c = ib[ib[Slot.SEG] + 3 * s + 2]
+    w = get_f(fb, ib, Slot.SEG_WT, s)
     nv = get_v(fb, ib, Slot.SEG_N, s)
     l = get_f(fb, ib, Slot.SEG_L, s)
-    K = get_f(fb, ib, Slot.KC, c) * nv.outer_product(nv)
+    K = get_f(fb, ib, Slot.KC, c) * w * w * nv.outer_product(nv)
     if l > 0.0:
-        K += get_f(fb, ib, Slot.TAU, c) / l * (ti.Matrix.identity(ti.f64, 2) - nv.outer_product(nv))
+        K += get_f(fb, ib, Slot.TAU, c) * w / l * (ti.Matrix.identity(ti.f64, 2) - nv.outer_product(nv))
     return K
 
 
@@ -236,7 +246,8 @@ def hessian(fb: ti.template(), ib: ti.template(), project: ti.i32, serial: ti.te
 
 @ti.func
 def segment_directional(fb: ti.template(), ib: ti.template(), src, serial: ti.template()):
-    """SEG_DD = change of each segment vector along src; CW = dL_c/dx . src."""
+    """SEG_DD = change of each segment vector along src; CW = dL_c/dx . src (L the
+    weighted length)."""
     ti.loop_config(serialize=serial)
     for s in range(ib[Slot.S]):
         dd = segment_vector(fb, ib, src, s)
@@ -264,12 +275,13 @@ def apply_hessian(fb: ti.template(), ib: ti.template(), src, dst, masked: ti.tem
     ti.loop_config(serialize=serial)
     for s in range(ib[Slot.S]):
         c = ib[ib[Slot.SEG] + 3 * s + 2]
+        w = get_f(fb, ib, Slot.SEG_WT, s)
         nv = get_v(fb, ib, Slot.SEG_N, s)
         dd = get_v(fb, ib, Slot.SEG_DD, s)
-        v = get_f(fb, ib, Slot.KC, c) * get_f(fb, ib, Slot.CW, c) * nv
+        v = get_f(fb, ib, Slot.KC, c) * get_f(fb, ib, Slot.CW, c) * w * nv
         l = get_f(fb, ib, Slot.SEG_L, s)
         if l > 0.0:
-            v += get_f(fb, ib, Slot.TAU, c) / l * (dd - nv * nv.dot(dd))
+            v += get_f(fb, ib, Slot.TAU, c) * w / l * (dd - nv * nv.dot(dd))
         set_v(fb, ib, Slot.SEG_VEC, s, v)
     gather(fb, ib, dst, True, masked, serial)
 
@@ -314,8 +326,8 @@ def k_hessian_entries(fb: F64, ib: I32, out: ti.types.ndarray(dtype=ti.f64, ndim
                        serial: ti.template()):
     """The Hessian's element blocks (36 per element, (6, 6) row-major over the
     corners' x, y) and segment blocks (144 per segment, over the 6 nodes of its
-    two points), as last prepared; single-segment cables include their axial
-    term kc dL/dx dL/dx^T. For the direct backend's assembly."""
+    two points), as last prepared, with their capstan weights; single-segment
+    cables include their axial term kc dL/dx dL/dx^T. For the direct backend's assembly."""
     ti.loop_config(serialize=serial)
     for e in range(ib[Slot.M]):
         B = get_m2(fb, ib, Slot.BM, e)
@@ -341,7 +353,8 @@ def k_hessian_entries(fb: F64, ib: I32, out: ti.types.ndarray(dtype=ti.f64, ndim
         l = get_f(fb, ib, Slot.SEG_L, s)
         K = mat2(0.0)
         if l > 0.0:
-            K = get_f(fb, ib, Slot.TAU, c) / l * (ti.Matrix.identity(ti.f64, 2) - nv.outer_product(nv))
+            K = get_f(fb, ib, Slot.TAU, c) * get_f(fb, ib, Slot.SEG_WT, s) / l * (
+                ti.Matrix.identity(ti.f64, 2) - nv.outer_product(nv))
         if ib[Slot.SINGLE] != 0:
             K += get_f(fb, ib, Slot.KC, c) * nv.outer_product(nv)
         for a, b in ti.ndrange(6, 6):

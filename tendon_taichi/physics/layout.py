@@ -93,8 +93,10 @@ class Slot:
     SEG_DD = _f64("SEG_DD", segment=2)    # change of the segment vector along a direction
     SEG_W = _f64("SEG_W", segment=1)      # n . that change
     SEG_VEC = _f64("SEG_VEC", segment=2)  # per-segment force vector (scratch)
+    SEG_WT = _f64("SEG_WT", segment=1)    # capstan weight w_s = exp(-mu Theta_s) (1: frictionless)
     # per cable
     A0 = _f64("A0", cable=1)          # rest length a0, m
+    RHO = _f64("RHO", cable=1)        # weighted rest-length factor sum w l0 / sum l0 (1: frictionless)
     AC = _f64("AC", cable=1)          # contraction ac, m
     EA = _f64("EA", cable=1)          # axial stiffness, N
     L = _f64("L", cable=1)            # current length, m

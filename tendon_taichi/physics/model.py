@@ -19,6 +19,7 @@ from ..body.mesh import Mesh
 from ..body.scene import Material
 from . import forces, runtime
 from .buffers import k_copy_nodes, k_read, k_read_int, k_read_ranges, k_write
+from .capstan import Capstan, FrictionJacobian, PointMap
 from .layout import Scalar, Slot, allocate, csr
 from .runtime import ti
 
@@ -45,6 +46,10 @@ class Model:
         self.parallel = bool(parallel)
         self.serial = not self.parallel
         self._upload()
+        #: capstan friction of the cables (None: frictionless)
+        self.capstan = Capstan(cables, cables.points.positions(mesh.triangles, mesh.nodes), cables.friction) \
+            if cables.has_friction else None
+        self.point_map = PointMap(mesh.triangles, cables.points.tri, cables.points.bary, self.fixed)
 
     @classmethod
     def from_problem(cls, problem, cables: CableSet | None = None,
@@ -83,6 +88,8 @@ class Model:
         host.put_int("CAB_START", cab.start)
         host.put_f64("A0", cab.a0)
         host.put_f64("EA", cab.stiffness)
+        host.put_f64("SEG_WT", np.ones(self.S))
+        host.put_f64("RHO", np.ones(self.C))
         # node <- segment incidences: end b with +bary, end a with -bary
         pt_nodes = T[cab.points.tri] if self.P else np.zeros((0, 3), np.int64)
         nodes = np.concatenate([pt_nodes[cab.segments[:, e]].ravel() for e in (0, 1)])
@@ -215,13 +222,48 @@ class Model:
         return self.node_vectors("VOUT")
 
     def cable_state(self) -> dict[str, np.ndarray]:
-        """Per cable at the current x: length ``L`` (m), rest length ``a`` (m), strain
-        ``e``, tension ``tau`` (N), ``kc`` = dtau/dL (N/m), ``tau_ac`` = dtau/dac (N/m)."""
+        """Per cable at the current x: (weighted) length ``L`` (m), rest length ``a``
+        (m), strain ``e``, tension ``tau`` (N, at the pull end), ``kc`` = dtau/dL
+        (N/m), ``tau_ac`` = dtau/dac (N/m), contraction ``ac`` (m)."""
         forces.k_update_cables(self.fb, self.ib, self.serial)
         C = self.C
-        L, ac, tau, kc, tau_ac = self.read_many([("L", C), ("AC", C), ("TAU", C), ("KC", C), ("TAU_AC", C)])
-        a = self.cables.a0 - ac
-        return {"L": L, "a": a, "e": L / a - 1.0, "tau": tau, "kc": kc, "tau_ac": tau_ac}
+        L, ac, tau, kc, tau_ac, rho = self.read_many([("L", C), ("AC", C), ("TAU", C), ("KC", C),
+                                                      ("TAU_AC", C), ("RHO", C)])
+        a = rho * (self.cables.a0 - ac)
+        return {"L": L, "a": a, "e": L / a - 1.0, "tau": tau, "kc": kc, "tau_ac": tau_ac, "ac": ac}
+
+    # ------------------------------------------------------------ capstan friction
+    def cable_points(self, x: np.ndarray | None = None) -> np.ndarray:
+        """Positions (P, 2) of the cables' embedded points at x (default: current)."""
+        x = self.positions() if x is None else np.asarray(x, dtype=float).reshape(self.n, 2)
+        return self.cables.points.positions(self.mesh.triangles, x)
+
+    def update_friction(self) -> float:
+        """Set the capstan weights from the current positions (frictionless cables: no
+        change); returns the largest change of a weight."""
+        if self.capstan is None:
+            return 0.0
+        st = self.capstan.state(self.cable_points())
+        change = float(np.abs(st.w - self.read("SEG_WT", self.S)).max(initial=0.0))
+        self.write("SEG_WT", st.w)
+        self.write("RHO", st.rho)
+        return change
+
+    def segment_tensions(self) -> np.ndarray:
+        """Tension (S,) N of every segment at the current x: tau w_s."""
+        forces.k_update_cables(self.fb, self.ib, self.serial)
+        tau, w = self.read_many([("TAU", self.C), ("SEG_WT", self.S)])
+        return tau[np.repeat(np.arange(self.C), np.diff(self.cables.start))] * w
+
+    def friction_jacobian(self) -> FrictionJacobian | None:
+        """The non-symmetric part of the equilibrium's Jacobian at the current x
+        (:mod:`.capstan`), None without friction."""
+        if self.capstan is None:
+            return None
+        cs = self.cable_state()
+        st = self.capstan.state(self.cable_points())
+        return FrictionJacobian(self.capstan, st, cs["tau"], cs["kc"], cs["e"], self.cables.a0 - cs["ac"],
+                                self.point_map)
 
     def tensions(self) -> np.ndarray:
         """Cable tensions tau (C,), N, at the current x."""
@@ -269,7 +311,7 @@ class Model:
     def hessian_data(self) -> dict[str, np.ndarray]:
         """What the direct backend assembles from (after prepare_hessian)."""
         m, S, C = self.m, self.S, self.C
-        D, seg_n, seg_l, tau, kc = self.read_many([("D", 16 * m), ("SEG_N", 2 * S), ("SEG_L", S),
-                                                   ("TAU", C), ("KC", C)])
-        return {"D": D.reshape(m, 4, 4), "Bm": self.Bm, "vol": self.vol,
-                "seg_n": seg_n.reshape(S, 2), "seg_l": seg_l, "tau": tau, "kc": kc}
+        D, seg_n, seg_l, seg_w, tau, kc = self.read_many([("D", 16 * m), ("SEG_N", 2 * S), ("SEG_L", S),
+                                                          ("SEG_WT", S), ("TAU", C), ("KC", C)])
+        return {"D": D.reshape(m, 4, 4), "Bm": self.Bm, "vol": self.vol, "seg_n": seg_n.reshape(S, 2),
+                "seg_l": seg_l, "seg_w": seg_w, "tau": tau, "kc": kc}

@@ -8,5 +8,5 @@ from .._lazy import lazy_exports
 __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     ".plant": ("plant", "write_planted", "solve_tendons", "MAX_TENDONS"),
     ".walk": ("PlantSettings", "PlantedTendon"),
-    ".bench": ("run_suite", "load_suite", "best_extractor"),
+    ".bench": ("run_suite", "load_suite", "route_rule"),
 })

@@ -1,16 +1,19 @@
-"""``planted-bench``: the optimizer and every extractor on a suite of planted layouts.
+"""``planted-bench``: the ``design`` pipeline on a suite of planted layouts.
 
 A suite is a folder of planted cases (``tendon-taichi planted``): per case a
 scene file ``NAME.toml`` whose goals were made by known tendons, and the
 layout ``NAME.json`` (``tendons`` with their rest ``waypoints``, ``length``,
-``planted_length``). Each case runs ``optimize`` and then every extractor,
-each followed by consolidation, on the last stage, and is scored against what
-was planted: pose error, active length / planted length, tendon count /
-planted count, kinks, worst capstan factor, realizable pose error, time. A
-case passes when its best extractor (the lowest realizable pose error among
-those that find at most planted + 1 tendons) finds at most planted + 1
-tendons, with a realizable pose error of at most 1 % of L, and the active
-length is at most twice the planted one.
+``planted_length``). Each case runs the design pipeline (optimize, every
+extractor, consolidation, route optimization, the recommendation) and is
+scored against what was planted, with the same friction: the recommended
+design's tendon count / planted count, its as-built pose error, worst
+capstan factor, kinks and clearance against the planted tendons' (their
+as-built error is their own contractions re-solved with friction), active
+length / planted length, time. A case passes when the design has at most
+planted + 1 tendons, an as-built pose error of at most 1 % of L, and the
+active length is at most twice the planted one; it meets the route rule when
+its worst capstan is at least the planted tendons' minus 0.05 and it has no
+more kinks than they have.
 
 Cases are independent and described by plain data (:func:`run_case` takes a
 path, a level and settings, and returns a JSON-able dict), so that a sweep
@@ -30,11 +33,14 @@ import numpy as np
 
 from ..apps.case import STOP, worker_setup
 from ..apps.case import run_case as run_one
+from ..body.problem import Problem
 from ..body.scene import load_scene, with_overrides
-from ..errors import InputError, Stopped
+from ..errors import ConvergenceError, InputError, Stopped
 from ..extract.consolidation import ConsolidationSettings
 from ..extract.plugins import available_extractors
-from ..files import atomic_path, write_json
+from ..extract.protocol import IdealizedState, Tendon, turn_angles
+from ..extract.realizable import solve_realizable_poses
+from ..files import atomic_path, file_stem, write_json
 from ..io.progress import Progress
 from ..tasks.engine import Task, case_id, run_tasks
 from ..version import provenance
@@ -44,6 +50,9 @@ from .gallery import plot_gallery
 MAX_EXTRA_TENDONS = 1
 MAX_REALIZABLE_POSE_REL = 0.01
 MAX_LENGTH_RATIO = 2.0
+#: the route rule: worst capstan at least the planted tendons' minus this, no more kinks
+CAPSTAN_SLACK = 0.05
+KINK_ANGLE = 30.0
 
 
 @dataclass(frozen=True)
@@ -85,67 +94,85 @@ def load_suite(directory: str | Path) -> list[Case]:
     return cases
 
 
-def best_extractor(extractors: dict[str, dict], planted_count: int) -> str | None:
-    """The extractor whose tendons a designer would build: the lowest realizable pose
-    error among those finding at most planted + 1 tendons (else among all)."""
-    ok = {n: m for n, m in extractors.items() if "error" not in m}
-    if not ok:
-        return None
-    few = {n: m for n, m in ok.items() if m["count"] <= planted_count + MAX_EXTRA_TENDONS} or ok
-    return min(few, key=lambda n: (few[n]["realizable_pose_error_rel"], few[n]["count"], n))
+def planted_figures(problem: Problem, layout: dict, solver: str = "auto") -> dict:
+    """The planted tendons scored as a design is, with the scene's friction:
+    ``planted_capstan_worst``, ``planted_kinks``, ``planted_total_turning`` (rad) and
+    ``planted_as_built_error_rel``, their own contractions re-solved with friction
+    (None if that robot cannot be solved)."""
+    mu = problem.scene.tendons.friction
+    paths = [np.asarray(t["waypoints"], dtype=float) for t in layout["tendons"]]
+    turns = [turn_angles(w) for w in paths]
+    theta = [float(t.sum()) for t in turns]
+    tendons = [Tendon(np.zeros(0, np.int64), np.zeros(0, np.int64), w, float(t.get("tension", 0.0)), 0.0)
+               for w, t in zip(paths, layout["tendons"])]
+    ratios = np.array([float(t.get("contraction_ratio", 0.05)) for t in layout["tendons"]])
+    state = IdealizedState(np.zeros(problem.fibers.n_fibers), np.zeros(problem.fibers.n_fibers), None, 0.0)
+    if problem.n_poses > 1:
+        state.poses = [state] * problem.n_poses
+    try:
+        real = solve_realizable_poses(problem, tendons, state, problem.scene.optimize, solver,
+                                      np.tile(ratios, (problem.n_poses, 1)))
+        error = real.pose_error_rel
+    except ConvergenceError:
+        error = None
+    return {"planted_capstan_worst": float(np.exp(-mu * max(theta, default=0.0))),
+            "planted_kinks": int(sum((t > np.radians(KINK_ANGLE)).sum() for t in turns)),
+            "planted_total_turning": float(sum(theta)), "planted_as_built_error_rel": error}
 
 
 def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Path,
              overrides: dict | None = None, extractors: list[str] | None = None,
-             solver: str = "auto", consolidation: dict | None = None) -> dict:
-    """Optimize one planted case and run the extractors on its last stage
-    (``consolidation``: the fields of :class:`~tendon_taichi.extract.consolidation.ConsolidationSettings`);
-    the recording goes to ``out_dir/NAME-rLEVEL.rrd``. Returns the case's figures."""
+             solver: str = "auto", consolidation: dict | None = None, tendons: dict | None = None) -> dict:
+    """Design one planted case (``consolidation``: the fields of
+    :class:`~tendon_taichi.extract.consolidation.ConsolidationSettings`; ``tendons``:
+    [tendons] settings to replace); its files go to ``out_dir/NAME-rLEVEL/``.
+    Returns the case's figures."""
     t0 = time.perf_counter()
     scene = load_scene(str(scene_path))
     if overrides:
         scene = with_overrides(scene, overrides)
+    scene = scene.with_tendons(**(tendons or {}))
     case = Case(Path(scene_path).stem, Path(scene_path), layout)
     name, planted_count, planted_length = case.name, case.planted_count, case.planted_length
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    rec = out_dir / f"{name}-r{level}.rrd"
-    result = run_one(scene, level, rec, solver, extractors, ConsolidationSettings(**(consolidation or {})))
-    run = result.run
+    folder = Path(out_dir) / f"{file_stem(name)}-r{level}"
+    cons = ConsolidationSettings(**(consolidation or {}))
+    d = run_one(scene, level, folder, solver, extractors, cons, budget=cons.budget or 0.005)
+    run, summary = d.run, d.summary
     final = run.summary["final"]
     length_ratio = final["active_length"] / planted_length if planted_length > 0 else float("inf")
     return {"case": name, "scene": run.summary.get("scene", scene.name), "level": level,
             "planted_count": planted_count, "planted_length": planted_length,
             "pose_error_rel": final["pose_error_rel"], "active_fibers": final["active_fibers"],
             "active_length": final["active_length"], "length_ratio": length_ratio,
-            "stages": len(run.stages), **score_extraction(result.extraction, planted_count, length_ratio),
-            "optimize_s": result.optimize_s, "time_s": time.perf_counter() - t0, "recording": str(rec)}
+            "stages": len(run.stages), **planted_figures(d.extraction.problem, layout, solver),
+            **score_design(summary, planted_count, length_ratio),
+            "optimize_s": summary["timing"]["optimize_s"], "time_s": time.perf_counter() - t0,
+            "recording": str(folder / "run.rrd")}
 
 
-def score_extraction(ex, planted_count: int, length_ratio: float) -> dict:
-    """A case's extraction figures: ``extractors`` (per extractor: count, lengths,
-    kinks, capstan, realizable pose error, tendons, or its ``error``), the ``best``
-    one (:func:`best_extractor`) and its figures, and whether the case ``passed``."""
-    per = {}
-    for r in ex.results:
-        if r.error is not None:
-            per[r.name] = {"error": r.error}
-            continue
-        m = r.metrics
-        per[r.name] = {"count": int(m["count"]), "extracted_count": int(m["extracted_count"]),
-                       "total_length": m["total_length"], "kinks": int(m["kinks"]),
-                       "capstan_worst": m["capstan_worst"], "tension_cv": m["tension_cv"],
-                       "realizable_pose_error_rel": m["realizable_pose_error_rel"],
-                       "tendons": [t.waypoints.tolist() for t in r.tendons]}
-    best = best_extractor(per, planted_count)
-    b = per.get(best, {})
-    passed = bool(best is not None and b["count"] <= planted_count + MAX_EXTRA_TENDONS
-                  and b["realizable_pose_error_rel"] <= MAX_REALIZABLE_POSE_REL
-                  and length_ratio <= MAX_LENGTH_RATIO)
-    return {"extractors": per, "best": best, "count": b.get("count"), "extracted_count": b.get("extracted_count"),
-            "count_ratio": (b["count"] / planted_count) if best else None,
-            "realizable_pose_error_rel": b.get("realizable_pose_error_rel"),
-            "kinks": b.get("kinks"), "capstan_worst": b.get("capstan_worst"), "passed": passed}
+def score_design(summary: dict, planted_count: int, length_ratio: float) -> dict:
+    """A case's design figures: the recommended ``count``, where it came from
+    (``best``), its as-built error, the frictionless one, worst capstan, kinks,
+    clearance and tendons, the ``front``, each extractor's final figures, and
+    whether the case ``passed`` (route rule aside: :func:`route_rule`)."""
+    rec = summary["recommended"]
+    m = rec["metrics"]
+    passed = bool(rec["count"] <= planted_count + MAX_EXTRA_TENDONS
+                  and m["realizable_pose_error_rel"] <= MAX_REALIZABLE_POSE_REL and length_ratio <= MAX_LENGTH_RATIO)
+    return {"count": rec["count"], "best": rec["source"], "count_ratio": rec["count"] / planted_count,
+            "realizable_pose_error_rel": m["realizable_pose_error_rel"],
+            "realizable_pose_error_rel_frictionless": m["realizable_pose_error_rel_frictionless"],
+            "kinks": int(m["kinks"]), "capstan_worst": m["capstan_worst"], "clearance_min": m["clearance_min"],
+            "total_length": m["total_length"], "tendons": [t["waypoints"] for t in rec["tendons"]],
+            "front": summary["front"], "extractors": {e["name"]: e for e in summary["extractors"]},
+            "passed": passed}
+
+
+def route_rule(case: dict) -> bool:
+    """The design's worst capstan is at least the planted tendons' minus CAPSTAN_SLACK
+    and it has no more kinks than they have."""
+    return bool(case["capstan_worst"] >= case["planted_capstan_worst"] - CAPSTAN_SLACK
+                and case["kinks"] <= case["planted_kinks"])
 
 
 def totals(cases: list[dict]) -> dict:
@@ -159,14 +186,19 @@ def totals(cases: list[dict]) -> dict:
     return {"cases": len(cases), "failed": len(cases) - len(done), "passed": sum(c["passed"] for c in done),
             "count_within_planted_plus_one": sum(1 for c in done if c["count"] is not None
                                                  and c["count"] <= c["planted_count"] + MAX_EXTRA_TENDONS),
+            "within_one_percent": sum(c["realizable_pose_error_rel"] <= MAX_REALIZABLE_POSE_REL for c in done),
+            "route_rule": sum(route_rule(c) for c in done),
             "median_length_ratio": med("length_ratio"), "median_count_ratio": med("count_ratio"),
             "median_realizable_pose_error_rel": med("realizable_pose_error_rel"),
+            "median_capstan_worst": med("capstan_worst"), "median_planted_capstan_worst": med("planted_capstan_worst"),
+            "kinks": sum(c["kinks"] for c in done), "planted_kinks": sum(c["planted_kinks"] for c in done),
             "time_s": float(sum(c.get("time_s", 0.0) for c in cases))}
 
 
-CSV_COLUMNS = ("case", "scene", "level", "planted_count", "count", "extracted_count", "best", "planted_length",
-               "active_length", "length_ratio", "pose_error_rel", "realizable_pose_error_rel", "kinks",
-               "capstan_worst", "passed", "time_s", "error")
+CSV_COLUMNS = ("case", "scene", "level", "planted_count", "count", "best", "planted_length",
+               "active_length", "length_ratio", "pose_error_rel", "realizable_pose_error_rel",
+               "realizable_pose_error_rel_frictionless", "planted_as_built_error_rel", "kinks", "planted_kinks",
+               "capstan_worst", "planted_capstan_worst", "clearance_min", "passed", "route_rule", "time_s", "error")
 
 
 def write_outputs(result: dict, out_dir: Path, suite: list[Case]) -> None:
@@ -177,7 +209,8 @@ def write_outputs(result: dict, out_dir: Path, suite: list[Case]) -> None:
             w = csv.writer(fh)
             w.writerow(CSV_COLUMNS)
             for c in result["cases"]:
-                w.writerow([c.get(k, "") if c.get(k) is not None else "" for k in CSV_COLUMNS])
+                row = {**c, "route_rule": route_rule(c)} if "error" not in c else c
+                w.writerow([row.get(k, "") if row.get(k) is not None else "" for k in CSV_COLUMNS])
     plot_gallery(out_dir / "gallery.png", result, {c.name: c for c in suite})
 
 
@@ -189,14 +222,15 @@ def _case_row(case: Case, level: int, o) -> dict:
 
 
 def _describe(row: dict) -> str:
-    return (f"{row['count']}/{row['planted_count']} tendons, length x{row['length_ratio']:.2f}, "
-            f"realizable {100 * row['realizable_pose_error_rel']:.2f}%, {'pass' if row['passed'] else 'miss'}")
+    return (f"{row['count']}/{row['planted_count']} tendons, length x{row['length_ratio']:.2f}, as built "
+            f"{100 * row['realizable_pose_error_rel']:.2f}%, capstan {row['capstan_worst']:.2f} (planted "
+            f"{row['planted_capstan_worst']:.2f}), {row['kinks']} kinks, {'pass' if row['passed'] else 'miss'}")
 
 
 def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides: dict | None = None,
               extractors: list[str] | None = None, solver: str = "auto", cases: list[str] | None = None,
               progress=None, workers: int | None = None, scheduler: str | None = None,
-              consolidation=None) -> dict:
+              consolidation=None, tendons: dict | None = None) -> dict:
     """Run every case of a suite (or the named ``cases``) as tasks of
     :func:`tendon_taichi.tasks.engine.run_tasks` (``workers``: local Dask cluster size,
     None: one per core, 0: in this process; ``scheduler``: an existing cluster).
@@ -211,21 +245,22 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
             raise InputError(f"no such case in the suite: {', '.join(sorted(unknown))}")
         suite = [c for c in suite if c.name in cases]
     overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
+    tendons = {k: v for k, v in (tendons or {}).items() if v is not None}
     for case in suite:  # bad scene files or settings stop the run before it starts
-        with_overrides(load_scene(str(case.scene_path)), overrides)
+        with_overrides(load_scene(str(case.scene_path)), overrides).with_tendons(**tendons)
     names = sorted(extractors or available_extractors())
     cons = dataclasses.asdict(consolidation or ConsolidationSettings())
     out_dir = Path(out_dir)
-    tasks = [Task(case_id({"kind": "planted", "scene": case.scene_path.read_text(), "layout": case.layout,
+    tasks = [Task(case_id({"kind": "planted-design", "scene": case.scene_path.read_text(), "layout": case.layout,
                            "level": level, "settings": overrides, "extractors": names, "solver": solver,
-                           "consolidation": cons}),
+                           "consolidation": cons, "tendons": tendons}),
                   case.name, run_case,
                   (str(case.scene_path), case.layout, level, str(out_dir / "cases"), overrides, names, solver,
-                   cons))
+                   cons, tendons))
              for case in suite]
     by_name = {c.name: c for c in suite}
     result = {"suite": str(directory), "level": level, "settings": overrides, "consolidation": cons,
-              "provenance": provenance(), "cases": []}
+              "tendons": tendons, "provenance": provenance(), "cases": []}
     done = {}
 
     def on_outcome(o) -> None:
@@ -247,18 +282,21 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
 
 def table(result: dict) -> list[str]:
     """The human-readable table of a planted-bench result."""
-    out = [f"{'case':<28} {'tendons':>8} {'best':>17} {'length':>7} {'pose':>6} {'real.':>6} {'kinks':>5} "
-           f"{'capstan':>7} {'time':>6}  result"]
+    out = [f"{'case':<26} {'tendons':>7} {'from':>17} {'length':>6} {'pose':>6} {'built':>6} {'capstan':>11} "
+           f"{'kinks':>5} {'time':>5}  result"]
     for c in result["cases"]:
         if "error" in c:
-            out.append(f"{c['case']:<28} failed: {c['error']}")
+            out.append(f"{c['case']:<26} failed: {c['error']}")
             continue
-        out.append(f"{c['case']:<28} {c['count']:>3} / {c['planted_count']:<2} {c['best']:>17} "
+        out.append(f"{c['case']:<26} {c['count']:>3} / {c['planted_count']:<1} {c['best']:>17} "
                    f"x{c['length_ratio']:>5.2f} {100 * c['pose_error_rel']:>5.2f}% "
-                   f"{100 * c['realizable_pose_error_rel']:>5.2f}% {c['kinks']:>5} {c['capstan_worst']:>7.3f} "
-                   f"{c['time_s']:>5.0f}s  {'pass' if c['passed'] else 'miss'}")
+                   f"{100 * c['realizable_pose_error_rel']:>5.2f}% {c['capstan_worst']:>5.2f}/{c['planted_capstan_worst']:<5.2f} "
+                   f"{c['kinks']:>2}/{c['planted_kinks']:<2} {c['time_s']:>4.0f}s  {'pass' if c['passed'] else 'miss'}"
+                   f"{'' if route_rule(c) else ', route rule missed'}")
     t = result["totals"]
     out.append(f"passed {t['passed']} of {t['cases']} ({t['failed']} failed); tendon count <= planted + 1 in "
-               f"{t['count_within_planted_plus_one']}; median length ratio {t['median_length_ratio']}, "
-               f"total time {t['time_s']:.0f} s")
+               f"{t['count_within_planted_plus_one']}; as built within 1 % of L in {t['within_one_percent']}; "
+               f"route rule (capstan >= planted - {CAPSTAN_SLACK:g}, kinks <= planted) in {t['route_rule']}; "
+               f"median capstan {t['median_capstan_worst']} (planted {t['median_planted_capstan_worst']}); "
+               f"median length ratio {t['median_length_ratio']}, total time {t['time_s']:.0f} s")
     return out

@@ -76,8 +76,9 @@ def plot_gallery(path: Path, result: dict, suite: dict) -> Path:
 
 def gallery_figure(result: dict, suite: dict):
     """One panel per case of a planted-bench ``result``: the body, the planted
-    tendons (dashed black) and the best extractor's tendons (colours), in rest
-    coordinates; ``suite`` maps case names to their cases."""
+    tendons (dashed black) and the recommended design's routes (colours, anchor a
+    circle, pull end a square), in rest coordinates; ``suite`` maps case names to
+    their cases."""
     cases = result["cases"]
     cols = min(4, max(1, len(cases)))
     rows = (len(cases) + cols - 1) // cols
@@ -99,13 +100,15 @@ def gallery_figure(result: dict, suite: dict):
         if "error" in c:
             ax.set_title(f"{c['case']}\nfailed: {c['error'][:40]}", fontsize=7)
         else:
-            for i, w in enumerate(c["extractors"].get(c["best"], {}).get("tendons", [])):
-                w = np.asarray(w)
-                ax.plot(w[:, 0], w[:, 1], color=colors[i % len(colors)], lw=2.0, alpha=0.85)
+            for i, w in enumerate(c.get("tendons", [])):
+                w, col = np.asarray(w), colors[i % len(colors)]
+                ax.plot(w[:, 0], w[:, 1], color=col, lw=2.0, alpha=0.85)
+                ax.plot(*w[0], "o", color=col, ms=3.5)
+                ax.plot(*w[-1], "s", color=col, ms=3.5)
             rp = c["realizable_pose_error_rel"]
             ax.set_title(f"{c['case']} ({'pass' if c['passed'] else 'miss'})\n"
-                         f"{c['count']}/{c['planted_count']} tendons ({c['best']}), "
-                         f"length x{c['length_ratio']:.2f}, real. {100 * rp:.2f}%", fontsize=7)
+                         f"{c['count']}/{c['planted_count']} tendons ({c['best']}), as built {100 * rp:.2f}%, "
+                         f"capstan {c['capstan_worst']:.2f}/{c['planted_capstan_worst']:.2f}", fontsize=7)
         ax.set_aspect("equal")
     fig.suptitle("planted (dashed) vs found (colour)", fontsize=10)
     fig.tight_layout()

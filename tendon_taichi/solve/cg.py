@@ -220,10 +220,14 @@ class CGSolver(LinearSolver):
             return None
         return self.pre(np.asarray(rhs, dtype=float).ravel()).reshape(-1, 2)
 
+    def resolve(self, rhs: np.ndarray, tol: float) -> np.ndarray:
+        """One CG solve with the Hessian as last prepared."""
+        return self.solve(rhs, tol=tol, prepare=False)
+
     def solve_many(self, rhs: Iterable[np.ndarray], tol: float) -> Iterator[np.ndarray]:
         """One CG solve per right-hand side; the Hessian is prepared for the first."""
         for j, b in enumerate(rhs):
-            yield self.solve(b, tol=tol, prepare=(j == 0))
+            yield self.solve(b, tol=tol) if j == 0 else self.resolve(b, tol)
 
     def reset(self) -> None:
         if self.pre is not None:

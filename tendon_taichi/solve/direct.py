@@ -1,9 +1,18 @@
 """The direct backend: the model's Hessian assembled as a scipy sparse matrix on
 the free DOFs and factorized by SuperLU, with a fill-reducing ordering
-computed once per sparsity pattern."""
+computed once per sparsity pattern.
+
+A many-segment cable (a tendon) couples every node along it through its axial
+stiffness ``kc g g^T`` (``g = dL/dx``, ``L`` its weighted length): a dense
+block per cable. It is kept out of the sparse matrix and applied as a low-rank
+update (Woodbury: one extra solve per taut tendon), so the sparse pattern is
+that of the elements and the segments alone, and its ordering - the
+elements' - is computed once per mesh and shared by every tendon layout."""
 
 from __future__ import annotations
 
+import weakref
+from dataclasses import dataclass
 from typing import Iterable, Iterator
 
 import numpy as np
@@ -16,24 +25,55 @@ from ._newton_kernels import direction_from
 from .linear import LinearSolver, LinearStats
 
 
-class Factorization:
-    """A SuperLU factorization of ``P H P^T``, ``P`` the fill-reducing ordering of
-    the backend's sparsity pattern (computed once, not per factorization);
-    :meth:`solve` works in the free-DOF numbering of ``H``."""
+@dataclass
+class Assembled:
+    """An assembled Hessian in the fill-reducing order: ``H = Hp + U diag(K) U^T``,
+    ``Hp`` sparse (CSC), ``U`` (nf, r) and ``K`` (r,) > 0 the taut tendons' axial terms."""
 
-    def __init__(self, Hp: sp.csc_matrix, order: np.ndarray):
+    Hp: sp.csc_matrix
+    U: np.ndarray
+    K: np.ndarray
+
+    def product(self, y: np.ndarray) -> np.ndarray:
+        """H y for y in the ordered numbering."""
+        out = self.Hp @ y
+        if len(self.K):
+            out += self.U @ (self.K * (self.U.T @ y))
+        return out
+
+
+class Factorization:
+    """A SuperLU factorization of an :class:`Assembled` Hessian's sparse part, with
+    the low-rank part by Woodbury's identity; :meth:`solve` works in the free-DOF
+    numbering (``order`` maps it to the ordered one)."""
+
+    def __init__(self, H: Assembled, order: np.ndarray):
         try:
-            self.lu = spla.splu(Hp, permc_spec="NATURAL", diag_pivot_thresh=0.1,
+            self.lu = spla.splu(H.Hp, permc_spec="NATURAL", diag_pivot_thresh=0.1,
                                 options={"SymmetricMode": True})
         except RuntimeError as exc:  # exactly singular
             raise np.linalg.LinAlgError(str(exc)) from None
         self.order = order
+        self.U = H.U
+        if len(H.K):
+            self.AinvU = self.lu.solve(np.asfortranarray(H.U))
+            self.capacitance = np.diag(1.0 / H.K) + H.U.T @ self.AinvU
+
+    def solve_ordered(self, bp: np.ndarray) -> np.ndarray:
+        y = self.lu.solve(bp)
+        if self.U.shape[1]:
+            y -= self.AinvU @ np.linalg.solve(self.capacitance, self.U.T @ y)
+        return y
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """y with H y = b, b (nf,) on the free DOFs."""
         bp = np.empty_like(b)
         bp[self.order] = b
-        return self.lu.solve(bp)[self.order]
+        return self.solve_ordered(bp)[self.order]
+
+
+#: the elements' fill-reducing ordering per mesh and clamp set (shared by tendon layouts)
+_ELEMENT_ORDER: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 class DirectSolver(LinearSolver):
@@ -61,22 +101,18 @@ class DirectSolver(LinearSolver):
         seg_nodes = np.concatenate([pt_nodes[cab.segments[:, 0]], pt_nodes[cab.segments[:, 1]]], 1)
         self.seg_coef = np.concatenate([-cab.points.bary[cab.segments[:, 0]],
                                         cab.points.bary[cab.segments[:, 1]]], 1)  # (S, 6)
-        sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)  # (S, 12)
-        rows = [np.repeat(edofs, 6, axis=1).ravel(), np.repeat(sdofs, 12, axis=1).ravel()]
-        cols = [np.tile(edofs, (1, 6)).ravel(), np.tile(sdofs, (1, 12)).ravel()]
-        # the axial part couples all the segments of a cable (one block per cable;
-        # single-segment cables add it to their segment's block)
-        if not m.single:
-            for c in range(m.C):
-                g = sdofs[cab.start[c]:cab.start[c + 1]].ravel()
-                rows.append(np.repeat(g, len(g)))
-                cols.append(np.tile(g, len(g)))
+        self.sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)  # (S, 12)
+        rows = [np.repeat(edofs, 6, axis=1).ravel(), np.repeat(self.sdofs, 12, axis=1).ravel()]
+        cols = [np.tile(edofs, (1, 6)).ravel(), np.tile(self.sdofs, (1, 12)).ravel()]
         r, c = np.concatenate(rows), np.concatenate(cols)
         free_index = np.cumsum(self.free) - 1
         self.keep = self.free[r] & self.free[c]
         r, c = free_index[r[self.keep]], free_index[c[self.keep]]
         nf = int(self.free.sum())
-        self.order = _fill_reducing_order(r, c, nf)
+        if m.single:  # the fiber lattice: its own ordering
+            self.order = _fill_reducing_order(r, c, nf)
+        else:  # tendons: the elements' ordering (the segments add local couplings only)
+            self.order = self._element_order(edofs, free_index, nf)
         r, c = self.order[r], self.order[c]
         key = c.astype(np.int64) * nf + r
         uniq, self.pos = np.unique(key, return_inverse=True)
@@ -85,40 +121,64 @@ class DirectSolver(LinearSolver):
         self.shape = (nf, nf)
         self.nnz = len(uniq)
 
-    def _values(self) -> np.ndarray:
-        """Every Hessian entry in pattern order: element and segment blocks from
-        Taichi, then (multi-segment cables) one axial block per cable."""
-        m = self.model
-        vals = [m.hessian_entries()]
-        if not m.single:
-            d = m.hessian_data()
-            grad = (self.seg_coef[:, :, None] * d["seg_n"][:, None, :]).reshape(-1, 12)  # dL/dx
-            st = m.cables.start
-            for c in range(m.C):
-                gv = grad[st[c]:st[c + 1]].ravel()
-                vals.append(d["kc"][c] * np.outer(gv, gv).ravel())
-        return np.concatenate(vals)
+    def _element_order(self, edofs: np.ndarray, free_index: np.ndarray, nf: int) -> np.ndarray:
+        mesh = self.model.mesh
+        key = self.free.tobytes()
+        cache = _ELEMENT_ORDER.setdefault(mesh, {})
+        if key not in cache:
+            r, c = np.repeat(edofs, 6, axis=1).ravel(), np.tile(edofs, (1, 6)).ravel()
+            keep = self.free[r] & self.free[c]
+            cache[key] = _fill_reducing_order(free_index[r[keep]], free_index[c[keep]], nf)
+        return cache[key]
 
-    def assemble_ordered(self, project: bool = False, prepare: bool = True) -> sp.csc_matrix:
-        """``P H P^T``: the Hessian on the free DOFs in the fill-reducing order, CSC."""
+    def _low_rank(self) -> tuple[np.ndarray, np.ndarray]:
+        """The taut many-segment cables' axial terms: U (nf, r) in the ordered
+        numbering, its columns their dL/dx, and K (r,) their kc."""
+        m = self.model
+        nf = self.shape[0]
+        if m.single or m.C == 0:
+            return np.zeros((nf, 0)), np.zeros(0)
+        seg_n, seg_w, kc = m.read_many([("SEG_N", 2 * m.S), ("SEG_WT", m.S), ("KC", m.C)])
+        # dL/dx of the (capstan-weighted) length, per segment
+        grad = (self.seg_coef[:, :, None] * (seg_n.reshape(-1, 2) * seg_w[:, None])[:, None, :]).reshape(-1, 12)
+        taut = np.flatnonzero(kc > 0.0)
+        full = np.zeros((2 * m.n, len(taut)))
+        st = m.cables.start
+        for j, c in enumerate(taut):
+            np.add.at(full[:, j], self.sdofs[st[c]:st[c + 1]].ravel(), grad[st[c]:st[c + 1]].ravel())
+        U = np.empty((nf, len(taut)))
+        U[self.order] = full[self.free]
+        return U, kc[taut]
+
+    def _values(self) -> np.ndarray:
+        """Every sparse Hessian entry in pattern order: element and segment blocks from Taichi."""
+        return self.model.hessian_entries()
+
+    def assemble_ordered(self, project: bool = False, prepare: bool = True) -> Assembled:
+        """``P H P^T``: the Hessian on the free DOFs in the fill-reducing order."""
         if prepare:
             self.model.prepare_hessian(project)
         vals = self._values()[self.keep]
         data = np.bincount(self.pos, weights=vals, minlength=self.nnz)
-        return sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape)
+        U, K = self._low_rank()
+        return Assembled(sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape), U, K)
 
     def assemble(self, project: bool = False, prepare: bool = True) -> sp.csc_matrix:
         """The Hessian of E_tot at x on the free DOFs (exact or projected), CSC."""
-        return self.assemble_ordered(project, prepare)[self.order][:, self.order].tocsc()
+        H = self.assemble_ordered(project, prepare)
+        full = H.Hp
+        if len(H.K):
+            full = full + sp.csc_matrix(H.U @ (H.K[:, None] * H.U.T))
+        return full[self.order][:, self.order].tocsc()
 
-    def factorize(self, Hp: sp.csc_matrix) -> Factorization:
+    def factorize(self, H: Assembled) -> Factorization:
         """Factorize an ordered Hessian (:meth:`assemble_ordered`)."""
-        return Factorization(Hp, self.order)
+        return Factorization(H, self.order)
 
-    def _factor_solve(self, Hp: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
-        lu = self.factorize(Hp)
+    def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:
+        lu = self.factorize(H)
         y = lu.solve(b)
-        res = b - self._ordered_product(Hp, y)
+        res = b - self._ordered_product(H, y)
         if np.linalg.norm(res) > 1e-10 * np.linalg.norm(b):  # one step of iterative refinement
             y += lu.solve(res)
         if not np.all(np.isfinite(y)):
@@ -127,11 +187,11 @@ class DirectSolver(LinearSolver):
         self.factor = lu
         return y
 
-    def _ordered_product(self, Hp: sp.csc_matrix, y: np.ndarray) -> np.ndarray:
+    def _ordered_product(self, H: Assembled, y: np.ndarray) -> np.ndarray:
         """H y from the ordered matrix, in the free-DOF numbering."""
         yp = np.empty_like(y)
         yp[self.order] = y
-        return (Hp @ yp)[self.order]
+        return H.product(yp)[self.order]
 
     def approx_solve(self, rhs: np.ndarray) -> np.ndarray | None:
         """Solve with the last factorization (the Hessian it was made from), full (n, 2);
@@ -180,11 +240,15 @@ class DirectSolver(LinearSolver):
         out[self.free] = y
         return out.reshape(-1, 2)
 
+    def resolve(self, rhs: np.ndarray, tol: float = 0.0) -> np.ndarray:
+        """One triangular solve with the last factorization (that of the last solve)."""
+        return self.approx_solve(rhs)
+
     def solve_many(self, rhs: Iterable[np.ndarray], tol: float) -> Iterator[np.ndarray]:
         """The first right-hand side factorizes the Hessian; the others reuse that
         factorization (one triangular solve each)."""
         for j, b in enumerate(rhs):
-            yield self.solve(b, tol=tol) if j == 0 else self.approx_solve(b)
+            yield self.solve(b, tol=tol) if j == 0 else self.resolve(b)
 
 
 def _fill_reducing_order(rows: np.ndarray, cols: np.ndarray, n: int) -> np.ndarray:

@@ -74,6 +74,11 @@ class LinearSolver(ABC):
         (iterative backends); ``prepare=False`` reuses the Hessian as last prepared."""
 
     @abstractmethod
+    def resolve(self, rhs: np.ndarray, tol: float) -> np.ndarray:
+        """y (n, 2) with H y = rhs for another right-hand side, H the Hessian of the
+        last :meth:`solve` (no new preparation or factorization)."""
+
+    @abstractmethod
     def approx_solve(self, rhs: np.ndarray) -> np.ndarray | None:
         """H0^-1 rhs (n, 2) with the factorization at hand (of a nearby state's
         Hessian), or None when there is none: for first-order predictions."""

@@ -9,7 +9,10 @@
   ``eta = min(0.01, sqrt(|g|/F))`` (superlinear convergence);
 * the line search backtracks on ``E_tot`` and never accepts an inverted
   triangle (``det F <= 0``);
-* converged when ``|g_free| <= tol * F`` with the force scale ``F = E h L``.
+* converged when ``|g_free| <= tol * F`` with the force scale ``F = E h L``;
+* with capstan friction (:mod:`tendon_taichi.physics.capstan`) the weights
+  are set from the current angles before every step and frozen inside it, so
+  the converged state balances the frictional forces.
 
 The backend (:mod:`.linear`) is given by name or as a
 :class:`~tendon_taichi.solve.linear.LinearSolver`.
@@ -90,6 +93,8 @@ class NewtonSolver:
         projected = 0
         gnorm, fresh = np.inf, False
         for it in range(self.max_iter + 1):
+            if m.capstan is not None and m.update_friction() > 0.0:
+                E, _ = m.energy_and_min_det()
             previous, gnorm = gnorm, float(np.sqrt(m.gradient_norm2()))
             if gnorm <= tol * F:
                 break

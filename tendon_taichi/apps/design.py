@@ -1,0 +1,196 @@
+"""``design``: the main job end to end (``docs/cli.md``): optimize the fiber
+contractions (recorded), run every extractor on the last stage, turn each
+one's tendons into smooth routes, consolidate and optimize them on the
+as-built robot (capstan friction and clearance included), and recommend the
+layout a designer should build: the fewest tendons whose as-built pose error
+is within the budget, ties broken by the worst capstan factor, then by length.
+
+Everything goes into one output folder: ``run.rrd`` (the run, the routes
+logged into it), ``run.npz`` (the problem export), ``design.json``,
+``design.svg`` (the fabrication drawing, mm), ``design.png`` (the rest body
+with the routes beside the as-built pose) and ``front.png`` (as-built error
+against tendon count)."""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..body.scene import Scene
+from ..errors import InputError
+from ..extract.consolidation import Layout, finish
+from ..extract.metrics import MetricSettings, tendon_metrics
+from ..extract.settings import BUDGET, ConsolidationSettings
+from ..files import check_writable, file_stem, write_json
+from ..io.drawing import write_svg
+from ..io.plots import plot_design, plot_front
+from ..io.progress import Progress
+from ..io.recording import rewrite
+from ..version import provenance
+from .extract import Extraction, extract, frictionless_error, log_layout
+from .optimize import RunResult, optimize
+
+#: what the output folder holds
+FILES = ("run.rrd", "run.npz", "design.json", "design.svg", "design.png", "front.png")
+
+
+def default_out(scene: Scene, level: int) -> Path:
+    """The output folder when none is given: ``designs/<scene>-r<level>``."""
+    return Path("designs") / f"{file_stem(scene.name)}-r{level}"
+
+
+@dataclass
+class Design:
+    """A finished design: its ``summary`` (what ``design.json`` holds), the ``run``
+    (the optimization), its ``extraction`` (every extractor's outcome) and the
+    ``layout`` recommended."""
+
+    summary: dict
+    run: RunResult
+    extraction: Extraction
+    layout: Layout
+
+
+def front_entries(ex: Extraction, mu: float, kink_angle: float) -> list[tuple[dict, Layout]]:
+    """Every layout each extractor's consolidation passed through, with its figures."""
+    out = []
+    for r in ex.results:
+        if r.error is None and r.consolidation is not None:
+            out += [(lay.front_entry(mu, kink_angle), lay) for lay in r.consolidation.front.values()]
+    return out
+
+
+def recommend(entries: list[tuple[dict, Layout]], budget: float, max_tendons: int | None) -> tuple[dict, Layout]:
+    """The fewest tendons (at most ``max_tendons``) whose as-built error is within
+    ``budget`` (fraction of L), the best worst capstan among them, then the
+    shortest; when none is within it, the lowest as-built error."""
+    pool = [e for e in entries if max_tendons is None or e[0]["count"] <= max_tendons]
+    if not pool:
+        raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)")
+    within = [e for e in pool if e[0]["realizable_pose_error_rel"] <= budget]
+    if within:
+        return min(within, key=lambda e: (e[0]["count"], -e[0]["capstan_worst"], e[0]["total_length"]))
+    return min(pool, key=lambda e: (e[0]["realizable_pose_error_rel"], e[0]["count"]))
+
+
+def front_table(entries: list[tuple[dict, Layout]]) -> list[dict]:
+    """One entry per count: the lowest as-built error any extractor reached with it."""
+    best: dict[int, dict] = {}
+    for e, _ in entries:
+        k = e["count"]
+        if k not in best or e["realizable_pose_error_rel"] < best[k]["realizable_pose_error_rel"]:
+            best[k] = e
+    return [best[k] for k in sorted(best)]
+
+
+def tendon_rows(layout: Layout, mu: float) -> list[dict]:
+    """The recommended tendons as ``design.json`` lists them."""
+    real = layout.realizable
+    P = 1 if real.poses is None else len(real.poses)
+    contraction = np.asarray(real.contraction).reshape(P, -1)
+    tension = np.asarray(real.tau).reshape(P, -1)
+    rows = []
+    for i, t in enumerate(layout.tendons()):
+        turning = float(t.turn_angles().sum())
+        rows.append({"waypoints": t.waypoints.tolist(), "control_points": t.control.tolist(),
+                     "anchor": t.anchor.tolist(), "pull_end": t.pull_end.tolist(), "length": t.length,
+                     "contraction": contraction[:, i].tolist(), "tension": float(tension[:, i].max()),
+                     "tension_per_pose": tension[:, i].tolist(), "turning": turning,
+                     "capstan": float(np.exp(-mu * turning)), "source": layout.routes[i].source or layout.source})
+    return rows
+
+
+def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: str = "auto",
+           budget: float = BUDGET, max_tendons: int | None = None, extractors: list[str] | None = None,
+           consolidation: ConsolidationSettings | None = None, progress: Progress | None = None,
+           plugin_timeout: float | None = None, png: bool = True) -> Design:
+    """The main job (module docstring) on ``scene`` at ``level`` into the folder
+    ``out`` (default :func:`default_out`); ``budget`` (fraction of L) both bounds
+    consolidation (unless ``consolidation`` says otherwise) and picks the
+    recommendation; ``png`` draws design.png and front.png."""
+    t0 = time.perf_counter()
+    progress = progress or Progress(enabled=False)
+    out = Path(out) if out is not None else default_out(scene, level)
+    for name in FILES:
+        check_writable(out / name, "output")
+    progress.message(f"design: optimizing {scene.name} at level {level}")
+    run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
+    t_opt = time.perf_counter() - t0
+    cons = consolidation or ConsolidationSettings(budget=budget)
+    kwargs = {} if plugin_timeout is None else {"plugin_timeout": plugin_timeout}
+
+    def log(text: str) -> None:
+        progress.message(f"design: {text}")
+
+    ex = extract(run.recording, extractors, solver="recorded", record=False, consolidation=cons, log=log, **kwargs)
+    problem = ex.problem
+    ms = MetricSettings(mu=problem.scene.tendons.friction)
+    entries = front_entries(ex, ms.mu, ms.kink_angle)
+    if not entries:
+        raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
+    _, layout = recommend(entries, budget, max_tendons)
+    if not layout.optimized:  # a layout consolidation passed through: its routes are optimized now
+        log(f"optimizing the recommended {layout.count} route(s)")
+        layout = finish(problem, layout, ex.state, ex.run.settings, cons, ex.run.meta.get("solver", "auto"), log)
+    summary = _summary(ex, layout, entries, budget, max_tendons, ms, t0, t_opt)
+    summary["files"] = _write(out, ex, layout, summary, png)
+    summary["time_s"] = time.perf_counter() - t0
+    write_json(summary, out / "design.json")
+    return Design(summary, run, ex, layout)
+
+
+def _summary(ex: Extraction, layout: Layout, entries, budget: float, max_tendons, ms: MetricSettings,
+             t0: float, t_opt: float) -> dict:
+    problem, run = ex.problem, ex.run
+    tendons = layout.tendons()
+    real = layout.realizable
+    metrics = tendon_metrics(problem, ex.state, tendons, ms)
+    metrics.update(realizable_pose_error=real.pose_error, realizable_pose_error_rel=real.pose_error_rel,
+                   realizable_pose_error_rel_frictionless=frictionless_error(
+                       problem, tendons, ex.state, run.settings, run.meta.get("solver", "auto"), real),
+                   idealized_pose_error_rel=ex.idealized_pose_error / problem.size)
+    if real.poses is not None:
+        metrics["realizable_pose_errors_rel"] = [r.pose_error_rel for r in real.poses]
+    ts = problem.scene.tendons
+    route_evals = sum(r.consolidation.route_evaluations for r in ex.results if r.consolidation is not None)
+    return {"scene": problem.scene.name, "resolution": problem.level, "body_size": problem.size,
+            "friction": ts.friction, "clearance": ts.clearance, "budget": budget, "max_tendons": max_tendons,
+            "recommended": {"count": layout.count, "source": layout.source, "tendons": tendon_rows(layout, ms.mu),
+                            "metrics": metrics},
+            "front": front_table(entries),
+            "extractors": [{"name": r.name, "count": r.metrics.get("count"),
+                            "realizable_pose_error_rel": r.metrics.get("realizable_pose_error_rel"),
+                            "capstan_worst": r.metrics.get("capstan_worst"), "time_s": r.time_s,
+                            **({"error": r.error} if r.error else {})} for r in ex.results],
+            "timing": {"optimize_s": t_opt, "extract_s": time.perf_counter() - t0 - t_opt,
+                       "route_evaluations": route_evals},
+            "provenance": provenance()}
+
+
+def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool) -> dict:
+    """The drawing, the pictures and the routes logged into the recording."""
+    problem = ex.problem
+    tendons = layout.tendons()
+    title = f"{problem.scene.name} level {problem.level}: {layout.count} tendon(s), as built " \
+            f"{100 * layout.error:.2f}% of L"
+    paths = {"recording": str(out / "run.rrd"), "export": str(out / "run.npz"), "json": str(out / "design.json"),
+             "svg": str(write_svg(out / "design.svg", problem, tendons, title))}
+    if png:
+        paths["png"] = str(plot_design(out / "design.png", problem, tendons, layout.realizable, title))
+        paths["front_png"] = str(plot_front(out / "front.png", summary["front"], summary["budget"],
+                                            summary["recommended"]["count"], problem.scene.name))
+    run = ex.run
+    stage = ex.stage
+
+    def add(rr, rec) -> None:
+        rec.set_time("stage", sequence=stage)
+        rec.set_time("iteration", sequence=int(run.stages[stage].summary.get("step", 0)))
+        log_layout(rr, rec, "/design/routes", problem, tendons, layout.realizable)
+        rec.log("/design/summary", rr.TextDocument(json.dumps(summary), media_type="text/plain"))
+
+    rewrite(run.path, run.meta.get("run_id"), lambda ch: not ch.entity_path.startswith("/design/"), add)
+    return paths

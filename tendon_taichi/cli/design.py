@@ -1,0 +1,96 @@
+"""The ``design`` command: the main job end to end (``docs/cli.md``)."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+
+from ..errors import InputError
+from ..extract.checks import PLUGIN_TIMEOUT
+from ..extract.settings import BUDGET
+from .common import PROG, SOLVER_CHOICES, add_json, json_out
+from .runs import add_optimize_flags, optimize_overrides
+from .tendons import add_consolidation_flags, add_tendon_flags, consolidation, plugin_timeout, tendon_settings
+
+
+def _checked(args) -> tuple[float, int | None]:
+    if not (math.isfinite(args.budget) and 0.0 < args.budget < 1.0):
+        raise InputError(f"--budget must be a fraction of L in (0, 1) (got {args.budget:g})")
+    if args.max_tendons is not None and args.max_tendons < 1:
+        raise InputError(f"--max-tendons must be an integer >= 1 (got {args.max_tendons})")
+    return args.budget, args.max_tendons
+
+
+def table(summary: dict) -> list[str]:
+    """The short table ``design`` prints: the front, the recommended tendons, the files."""
+    rec = summary["recommended"]
+    m = rec["metrics"]
+    out = [f"{summary['scene']} level {summary['resolution']} (L = {100 * summary['body_size']:.2f} cm, friction "
+           f"{summary['friction']:g}, clearance {summary['clearance']:g} L, budget {100 * summary['budget']:g}% of L)",
+           f"{'tendons':>7} {'as built':>9} {'capstan':>7} {'kinks':>5} {'length':>8}  from"]
+    for e in summary["front"]:
+        mark = " *" if e["count"] == rec["count"] else "  "
+        out.append(f"{e['count']:>5}{mark} {100 * e['realizable_pose_error_rel']:>8.2f}% {e['capstan_worst']:>7.3f} "
+                   f"{e['kinks']:>5} {100 * e['total_length']:>5.1f} cm  {e['source']}")
+    out.append(f"recommended: {rec['count']} tendon(s) (from {rec['source']}), as built "
+               f"{100 * m['realizable_pose_error_rel']:.2f}% of L (frictionless "
+               f"{100 * m['realizable_pose_error_rel_frictionless']:.2f}%), worst capstan {m['capstan_worst']:.3f}, "
+               f"{m['kinks']} kinks, clearance {1e3 * (m['clearance_min'] or 0):.1f} mm")
+    for i, t in enumerate(rec["tendons"]):
+        pulls = ", ".join(f"{1e3 * c:.2f}" for c in t["contraction"])
+        out.append(f"  tendon {i + 1}: {100 * t['length']:.1f} cm, pull {pulls} mm, tension {t['tension']:.3f} N, "
+                   f"turning {np.degrees(t['turning']):.0f} deg, capstan {t['capstan']:.3f}")
+    files = summary["files"]
+    out.append(f"files: {files['json']}, {files['svg']}" + (f", {files['png']}, {files['front_png']}"
+                                                              if "png" in files else "")
+               + f", {files['recording']}")
+    return out
+
+
+def cmd_design(args) -> int:
+    from ..apps.design import design
+    from ..body.scene import load_scene, with_overrides
+    from ..io.progress import Progress
+
+    budget, max_tendons = _checked(args)
+    tendons = tendon_settings(args)
+    cons = consolidation(args, budget=budget)
+    timeout = plugin_timeout(args)
+    if args.resolution < 1:
+        raise InputError(f"--resolution must be >= 1 (got {args.resolution})")
+    scene = with_overrides(load_scene(args.scene), optimize_overrides(args)).with_tendons(**tendons)
+    result = design(scene, args.resolution, args.out, args.solver, budget, max_tendons, args.extractors, cons,
+                    Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png)
+    summary = result.summary
+    json_out(args, summary)
+    if args.json != "-":
+        print("\n".join(table(summary)))
+    failed = [e for e in summary["extractors"] if "error" in e]
+    for e in failed:
+        print(f"{PROG}: error: {e['error']}", file=sys.stderr)
+    return 4 if failed else 0
+
+
+def add_commands(sub) -> None:
+    s = sub.add_parser("design", help="the main job: optimize, extract, consolidate, route, recommend a design")
+    s.add_argument("scene", metavar="SCENE", help="built-in scene name or scene TOML file")
+    s.add_argument("--resolution", type=int, default=1, metavar="N", help="resolution level (default 1)")
+    s.add_argument("--out", metavar="DIR", help="output folder (default designs/<scene>-r<N>)")
+    s.add_argument("--budget", type=float, default=BUDGET, metavar="F",
+                   help=f"the as-built pose error you accept, F x L (default {BUDGET:g}): the recommended "
+                        "design is the fewest tendons within it")
+    s.add_argument("--max-tendons", type=int, default=None, metavar="K",
+                   help="recommend at most K tendons")
+    s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")
+    s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto", help="linear solver (default auto)")
+    add_tendon_flags(s)
+    add_consolidation_flags(s, budget=False)
+    s.add_argument("--plugin-timeout", type=float, default=PLUGIN_TIMEOUT, metavar="S",
+                   help=f"give up on an extractor that runs longer than S seconds (default {PLUGIN_TIMEOUT:g})")
+    s.add_argument("--no-png", action="store_true", help="skip design.png and front.png")
+    s.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_optimize_flags(s)
+    add_json(s)
+    s.set_defaults(func=cmd_design)

@@ -1,0 +1,249 @@
+"""Route optimization (``docs/method.md``, routes): the control points of every
+route - anchor and pull end included - and each pose's tendon contractions,
+moved together to minimize
+
+    O = O_pose + O_reg                                   (the realizable soft IK, as built)
+      + w_fric sum_t (1 - exp(-mu Theta_t))              (the pull the routes lose to their bends)
+      + w_bend sum_j max(0, |theta_j| - theta_max)^2     (bends sharper than a channel takes)
+      + w_clear sum_i max(0, c - d_i)^2 / L^2            (waypoints closer than c to a wall)
+
+``Theta_t`` is route t's rest turning (smoothed where it is straight),
+``theta_j`` the turn at one of its waypoints, ``d_i`` a waypoint's distance
+from the walls and ``c`` the clearance. The friction price ``w_fric`` is the
+budget squared: losing a whole tendon's pull weighs as much as a pose error
+of the whole budget. The gradient
+w.r.t. the contractions is the soft IK's; w.r.t. a waypoint's rest position it
+is ``-lambda^T dR/dX`` from the same adjoint solve
+(:func:`~tendon_taichi.physics.waypoints.rest_point_gradient`), and the
+waypoints are linear in the control points (:mod:`.routes`). Every evaluation
+embeds the waypoints in the rest mesh anew and solves each pose's as-built
+equilibrium (capstan friction included), warm started from the last one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize as so
+
+from ..body.problem import Problem
+from ..errors import ConvergenceError
+from ..objective.settings import OptimizeSettings
+from ..optimizer.soft_ik import SoftIK
+from ..physics.capstan import perp
+from ..physics.waypoints import rest_point_gradient
+from .realizable import tendon_cables
+from .routes import Route
+
+#: the weight of the friction cost (the default budget, 0.5 % of L, squared)
+FRICTION_PRICE = 0.005 ** 2
+#: the weight of the clearance penalty
+CLEARANCE_WEIGHT = 1.0e2
+#: the sharpest turn at one waypoint (rad; waypoints are 1.5 % of L apart: a bend
+#: radius of about 4 % of L) and the weight of the penalty on sharper ones
+MAX_BEND = 0.35
+BEND_WEIGHT = 1.0e-2
+#: smoothing of |theta| in the friction cost (rad): sqrt(theta^2 + d^2) - d
+TURN_SMOOTHING = 1.0e-3
+
+
+def turns(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The signed turns theta_j (k-2,) at the interior points of a polyline (k, 2),
+    rad, and their gradients w.r.t. the segment before and after each, (k-2, 2) each."""
+    d = np.diff(points, axis=0)
+    a, b = d[:-1], d[1:]
+    theta = np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], (a * b).sum(axis=1))
+    ga = -perp(a) / np.maximum((a * a).sum(axis=1), 1e-300)[:, None]
+    gb = perp(b) / np.maximum((b * b).sum(axis=1), 1e-300)[:, None]
+    return theta, ga, gb
+
+
+def _to_points(coef: np.ndarray, ga: np.ndarray, gb: np.ndarray, n: int) -> np.ndarray:
+    """The gradient (n, 2) w.r.t. the points of sum_j f(theta_j), coef_j = f'(theta_j)."""
+    g = np.zeros((n, 2))
+    ga, gb = coef[:, None] * ga, coef[:, None] * gb
+    # segment a_j = p[j+1] - p[j], b_j = p[j+2] - p[j+1]
+    g[:-2] -= ga
+    g[1:-1] += ga - gb
+    g[2:] += gb
+    return g
+
+
+def turning(points: np.ndarray, delta: float = TURN_SMOOTHING) -> tuple[float, np.ndarray]:
+    """Smoothed total turning sum_j (sqrt(theta_j^2 + delta^2) - delta) of a polyline
+    (k, 2), rad, and its gradient (k, 2)."""
+    if len(points) < 3:
+        return 0.0, np.zeros_like(points)
+    theta, ga, gb = turns(points)
+    root = np.sqrt(theta * theta + delta * delta)
+    return float((root - delta).sum()), _to_points(theta / root, ga, gb, len(points))
+
+
+def sharp_bends(points: np.ndarray, limit: float = MAX_BEND) -> tuple[float, np.ndarray]:
+    """sum_j max(0, |theta_j| - limit)^2 over the interior points of a polyline (k, 2),
+    and its gradient (k, 2)."""
+    if len(points) < 3:
+        return 0.0, np.zeros_like(points)
+    theta, ga, gb = turns(points)
+    over = np.maximum(np.abs(theta) - limit, 0.0)
+    return float((over * over).sum()), _to_points(2.0 * over * np.sign(theta), ga, gb, len(points))
+
+
+@dataclass
+class RouteSettings:
+    """``friction`` mu, ``clearance`` (m), ``friction_price`` and ``clearance_weight``
+    (module docstring), ``iterations``: the most L-BFGS-B iterations of one
+    optimization."""
+
+    friction: float
+    clearance: float
+    friction_price: float = FRICTION_PRICE
+    clearance_weight: float = CLEARANCE_WEIGHT
+    bend_weight: float = BEND_WEIGHT
+    iterations: int = 60
+
+
+class RouteObjective:
+    """O over ``z = [control points / L of every route, stacked; ratios (P, T)]``
+    and its gradient (module docstring)."""
+
+    def __init__(self, problem: Problem, routes: list[Route], settings: OptimizeSettings,
+                 route_settings: RouteSettings, solver: str = "auto"):
+        self.problem, self.settings, self.rs, self.solver = problem, settings, route_settings, solver
+        self.routes = list(routes)
+        self.sizes = [len(r.control) for r in routes]
+        self.n_control = 2 * sum(self.sizes)
+        self.L = problem.size
+        self.walls = problem.walls
+        self.positions: list[np.ndarray] | None = None  # each pose's last equilibrium (warm starts)
+        self.eval_tol: float | None = None
+        self.evaluations = 0
+
+    # ------------------------------------------------------------ variables
+    def pack(self, routes: list[Route], ratios: np.ndarray) -> np.ndarray:
+        return np.concatenate([np.concatenate([r.control.ravel() for r in routes]) / self.L,
+                               np.asarray(ratios, dtype=float).ravel()])
+
+    def unpack(self, z: np.ndarray) -> tuple[list[Route], np.ndarray]:
+        """The routes and ratios (P, T) at z."""
+        z = np.asarray(z, dtype=float)
+        c = z[:self.n_control].reshape(-1, 2) * self.L
+        bounds = np.cumsum([0] + self.sizes)
+        routes = [r.with_control(c[a:b]) for r, a, b in zip(self.routes, bounds[:-1], bounds[1:])]
+        return routes, z[self.n_control:].reshape(self.problem.n_poses, len(self.routes))
+
+    def bounds(self) -> so.Bounds:
+        """Control points within the body's bounding box, ratios within [-pmax, cmax]."""
+        lo, hi = self.problem.mesh.nodes.min(axis=0) / self.L, self.problem.mesh.nodes.max(axis=0) / self.L
+        n = sum(self.sizes)
+        fs = self.problem.scene.fibers
+        r = self.problem.n_poses * len(self.routes)
+        return so.Bounds(np.r_[np.tile(lo, n), np.full(r, -fs.max_payout)],
+                         np.r_[np.tile(hi, n), np.full(r, fs.max_contraction)])
+
+    # ------------------------------------------------------------ explicit terms
+    def bend_cost(self, points: list[np.ndarray]) -> tuple[float, list[np.ndarray]]:
+        """The friction and the sharp-bend terms of O, and their gradients per route."""
+        mu, wf, wb = self.rs.friction, self.rs.friction_price, self.rs.bend_weight
+        total, grads = 0.0, []
+        for p in points:
+            sharp, g = sharp_bends(p)
+            total += wb * sharp
+            g = wb * g
+            if mu > 0.0 and wf > 0.0:
+                theta, gt = turning(p)
+                keep = np.exp(-mu * theta)
+                total += wf * (1.0 - keep)
+                g = g + wf * mu * keep * gt
+            grads.append(g)
+        return total, grads
+
+    def clearance_cost(self, points: np.ndarray) -> tuple[float, np.ndarray]:
+        c, w = self.rs.clearance, self.rs.clearance_weight
+        d, g = self.walls.distance_gradient(points)
+        short = np.maximum(c - d, 0.0) / self.L
+        return float(w * (short * short).sum()), (-2.0 * w / self.L * short)[:, None] * g
+
+    # ------------------------------------------------------------ evaluation
+    def soft_ik(self, routes: list[Route]) -> SoftIK:
+        """The as-built robot of these routes, warm started from the last positions."""
+        ik = SoftIK(self.problem, self.settings, self.solver, cables=tendon_cables(
+            self.problem, [r.tendon() for r in routes]))
+        if self.eval_tol is not None:
+            ik.eval_tol = self.eval_tol
+        if self.positions is not None:
+            for ps, x in zip(ik.poses, self.positions):
+                ps.model.set_positions(x)
+        return ik
+
+    def evaluate(self, z: np.ndarray) -> tuple[float, np.ndarray]:
+        """O and dO/dz at z; raises ConvergenceError when an equilibrium fails."""
+        routes, ratios = self.unpack(z)
+        ik = self.soft_ik(routes)
+        f, g_r = ik.evaluate(ratios.ravel())
+        self.positions = [ps.model.positions() for ps in ik.poses]
+        gX = np.zeros((ik.model.P, 2))
+        for ps, lam in zip(ik.poses, ik.adjoints):
+            gX -= rest_point_gradient(ps.model, lam)
+        points = [r.waypoints for r in routes]
+        ff, gf = self.bend_cost(points)
+        fc, gc = self.clearance_cost(np.concatenate(points))
+        gX += np.concatenate(gf) + gc
+        g_c, at = [], 0
+        for r, p in zip(routes, points):
+            g_c.append(r.basis.T @ gX[at:at + len(p)])
+            at += len(p)
+        self.evaluations += 1
+        return f + ff + fc, np.concatenate([np.concatenate(g_c).ravel() * self.L, g_r])
+
+
+@dataclass
+class RoutedLayout:
+    """The outcome of :func:`optimize_routes`: the routes, each pose's ratios (P, T),
+    the objective before and after, and the count of evaluations."""
+
+    routes: list[Route]
+    ratios: np.ndarray
+    objective_start: float
+    objective: float
+    evaluations: int
+    message: str
+
+
+def optimize_routes(problem: Problem, routes: list[Route], ratios: np.ndarray, settings: OptimizeSettings,
+                    route_settings: RouteSettings, solver: str = "auto", positions=None,
+                    on_iteration=None) -> RoutedLayout:
+    """Minimize O (module docstring) from ``routes`` and ``ratios`` (P, T) by L-BFGS-B,
+    warm started from ``positions`` (each pose's equilibrium, (n, 2)) where given;
+    returns the best point evaluated. ``on_iteration(k, objective)`` is called per
+    iteration."""
+    obj = RouteObjective(problem, routes, settings, route_settings, solver)
+    obj.positions = None if positions is None else [np.asarray(x) for x in positions]
+    z0 = obj.pack(routes, ratios)
+    best = {"f": np.inf, "z": z0}
+
+    def fun(z):
+        try:
+            f, g = obj.evaluate(z)
+        except ConvergenceError:  # an equilibrium that fails is a step too far: make it look bad
+            f0 = best["f"] if np.isfinite(best["f"]) else 1.0
+            return 10.0 * abs(f0) + 1.0, np.zeros_like(z)
+        if f < best["f"]:
+            best.update(f=f, z=np.array(z))
+        return f, g
+
+    f_start, _ = fun(z0)
+    it = {"k": 0}
+
+    def callback(intermediate_result):
+        it["k"] += 1
+        if on_iteration is not None:
+            on_iteration(it["k"], best["f"])
+
+    res = so.minimize(fun, z0, jac=True, method="L-BFGS-B", bounds=obj.bounds(), callback=callback,
+                      options={"maxiter": route_settings.iterations, "ftol": 1e-12, "gtol": 1e-10,
+                               "maxcor": 10, "maxls": 30})
+    out_routes, out_ratios = obj.unpack(best["z"])
+    return RoutedLayout(out_routes, out_ratios, float(f_start), float(best["f"]), obj.evaluations,
+                        str(res.message))
