@@ -84,15 +84,16 @@ PLANTED = [
 
 @pytest.fixture(scope="module")
 def planted():
-    """t_shape with its goals made by two lattice-path tendons at 8 % contraction:
-    (problem, fiber ids per tendon, the planted equilibrium)."""
+    """t_shape with its goals made by two lattice-path tendons at 8 % contraction,
+    frictionless (the problem's tendon friction is 0): (problem, fiber ids per
+    tendon, the planted equilibrium)."""
     from dataclasses import replace
 
     from tendon_taichi import Model, NewtonSolver, build_problem, load_scene
     from tendon_taichi.extraction import FiberView, IdealizedState
     from tendon_taichi.extract.realizable import tendon_cables
 
-    base = build_problem(load_scene("t_shape"), 1)
+    base = build_problem(load_scene("t_shape"), 1).with_tendons(friction=0.0)
     paths = [lattice_path(base, [np.array(q) for q in path]) for path in PLANTED]
     view = FiberView(base)
     n = base.fibers.n_fibers

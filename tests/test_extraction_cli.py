@@ -59,11 +59,13 @@ def test_extract_writes_json_svg_and_logs_into_the_recording(run_rrd, cli, tmp_p
                 "coverage", "realizable_pose_error", "realizable_pose_error_rel", "idealized_pose_error_rel"):
         assert key in e["metrics"]
     assert e["metrics"]["count"] == len(e["tendons"]) >= 1
+    assert e["metrics"]["clearance_min"] >= 0.02 * out["body_size"] * (1 - 1e-6)
+    assert e["metrics"]["realizable_pose_error_rel_frictionless"] > 0
     # consolidation (default on) reports where it started and every step it took
     cons = e["consolidation"]
     assert cons["extracted_count"] == e["metrics"]["extracted_count"] >= e["metrics"]["count"]
     counts = [cons["extracted_count"]] + [s["count"] for s in cons["steps"]]
-    for before, s, after in zip(counts, cons["steps"], counts[1:]):  # drop and join remove one; refining none
+    for before, s, after in zip(counts, cons["steps"], counts[1:]):  # drop and join remove one; the others none
         assert after == before - (s["action"] in ("drop", "join"))
     assert counts[-1] == e["metrics"]["count"]
     # within the default bound: the extracted error + 0.1 % of L, or the 0.5 % budget
@@ -72,7 +74,8 @@ def test_extract_writes_json_svg_and_logs_into_the_recording(run_rrd, cli, tmp_p
     for t in e["tendons"]:
         assert set(t) >= {"waypoints", "length", "tension", "contraction"}
     root = ET.parse(svg).getroot()
-    assert len(root.findall(".//{http://www.w3.org/2000/svg}polyline")) == len(e["tendons"])
+    routes = [p for p in root.iter("{http://www.w3.org/2000/svg}path") if p.get("class") == "route"]
+    assert len(routes) == len(e["tendons"]) and all(" C " in p.get("d") for p in routes)  # smooth paths
     # logged at the stage it came from; the file stays a valid recording of the run
     from rerun.chunk import RrdReader
     ents = {c.entity_path for c in RrdReader(rec).stream()}
@@ -85,13 +88,13 @@ def test_extract_writes_json_svg_and_logs_into_the_recording(run_rrd, cli, tmp_p
 
 def test_compare_runs_every_extractor_with_a_picture(run_rrd, cli, tmp_path):
     png = tmp_path / "c.png"
-    r = cli("compare", run_rrd, "--png", png, "--no-record", "--json")
+    r = cli("compare", run_rrd, "--png", png, "--no-record", "--refine", "0", "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert {e["name"] for e in out["extractors"]} >= {"strands", "network_discovery", "path_cover"}
     assert all("error" not in e for e in out["extractors"]) and png.read_bytes()[:4] == b"\x89PNG"
-    table = cli("compare", run_rrd, "--no-record", "--extractors", "strands", "path_cover").stdout
-    assert "strands" in table and "path_cover" in table and "realizable" in table
+    table = cli("compare", run_rrd, "--no-record", "--no-consolidate", "--extractors", "strands", "path_cover").stdout
+    assert "strands" in table and "path_cover" in table and "as built" in table
     raw = json.loads(cli("compare", run_rrd, "--no-record", "--no-consolidate", "--json").stdout)
     for e in raw["extractors"]:
         assert e["consolidation"]["steps"] == [] and e["consolidation"]["evaluations"] == 0
@@ -104,7 +107,8 @@ def test_third_party_plugin_is_listed_and_used(run_rrd, cli, plugin_path):
     names = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
     assert names["strongest"]["distribution"] == "demo-extractor"
     assert "error" in names["broken"]  # a plugin that cannot be imported is reported, not fatal
-    r = cli("compare", run_rrd, "--no-record", "--extractors", "strongest", "strands", "--json", env=env)
+    r = cli("compare", run_rrd, "--no-record", "--refine", "0", "--extractors", "strongest", "strands", "--json",
+            env=env)
     assert r.returncode == 0, r.stderr
     out = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
     assert out["strongest"]["metrics"]["count"] == 1 and "error" not in out["strands"]
@@ -112,14 +116,16 @@ def test_third_party_plugin_is_listed_and_used(run_rrd, cli, plugin_path):
 
 def test_failing_plugins_do_not_stop_the_others(run_rrd, cli, plugin_path):
     env = {"PYTHONPATH": os.pathsep.join([str(plugin_path), os.environ.get("PYTHONPATH", "")])}
-    r = cli("compare", run_rrd, "--no-record", "--extractors", "raises", "broken", "path_cover", "--json", env=env)
+    r = cli("compare", run_rrd, "--no-record", "--refine", "0", "--extractors", "raises", "broken", "path_cover",
+            "--json", env=env)
     assert r.returncode == 4
     out = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
     assert "raised RuntimeError: this plugin always fails" in out["raises"]["error"]
     assert "failed to load" in out["broken"]["error"]
     errors = [line for line in r.stderr.splitlines() if line.startswith("tendon-taichi: error:")]
     assert len(errors) == 2 and "Traceback" not in r.stderr
-    alone = json.loads(cli("compare", run_rrd, "--no-record", "--extractors", "path_cover", "--json").stdout)
+    alone = json.loads(cli("compare", run_rrd, "--no-record", "--refine", "0", "--extractors", "path_cover",
+                           "--json").stdout)
     (expected,) = alone["extractors"]
     assert out["path_cover"]["metrics"] == expected["metrics"]  # the failures changed nothing of the others
     assert [t["waypoints"] for t in out["path_cover"]["tendons"]] == [t["waypoints"] for t in expected["tendons"]]
@@ -159,13 +165,13 @@ def test_a_plugin_that_hangs_is_given_up(run_rrd, cli, plugin_path):
 def test_a_recording_that_cannot_be_rewritten_keeps_the_results(run_rrd, tmp_path, monkeypatch, capsys):
     """As in a read-only folder (which root, running these tests, could still write):
     the results reach stdout, one error line says why, the recording is unchanged."""
-    import tendon_taichi.apps.extract as extract_app
+    import tendon_taichi.io.recording as recording
     from tendon_taichi.cli.main import main
 
     def refuse(path, data):
         raise PermissionError(13, "Permission denied", str(path))
 
-    monkeypatch.setattr(extract_app, "replace_with_bytes", refuse)
+    monkeypatch.setattr(recording, "replace_with_bytes", refuse)
     rec = tmp_path / "run.rrd"
     rec.write_bytes(run_rrd.read_bytes())
     assert main(["compare", str(rec), "--no-consolidate", "--extractors", "strands", "--json"]) == 2
@@ -192,7 +198,7 @@ def test_the_compare_picture_draws_each_extractors_tendons(run_rrd):
         paths = [ln for ln in ax.get_lines() if ln.get_linewidth() == 2.2]  # one polyline per tendon
         assert len(paths) == len(r.tendons) >= 1
         for ln, t in zip(paths, r.tendons):
-            assert len(ln.get_xdata()) == len(t.nodes)
+            assert len(ln.get_xdata()) == len(t.waypoints)
 
 
 def _one_line(r, text):
@@ -213,6 +219,8 @@ def test_extract_bad_input(run_rrd, cli, tmp_path):
     _one_line(cli("extract", run_rrd, "--extractor", "strands", "--screen", "-2", "--no-record"),
               "--screen must be an integer >= 0")
     _one_line(cli("extract", tmp_path / "none.rrd", "--extractor", "strands"), "does not exist")
+    _one_line(cli("compare", run_rrd, "--friction", "-1", "--no-record"), "--friction must be a number in [0, 2]")
+    _one_line(cli("compare", run_rrd, "--clearance", "inf", "--no-record"), "--clearance must be a number in")
     from tendon_taichi import build_problem, load_scene
     from tendon_taichi.io.recording import Recorder
     p = build_problem(load_scene("finger"), 1)

@@ -6,7 +6,8 @@ layout a designer should build: the fewest tendons whose as-built pose error
 is within the budget, ties broken by the worst capstan factor, then by length.
 
 Everything goes into one output folder: ``run.rrd`` (the run, the routes
-logged into it), ``run.npz`` (the problem export), ``design.json``,
+logged into it), ``run.npz`` (the problem export), ``as_built.npz`` (the
+as-built robot: routes, equilibria, tensions), ``design.json``,
 ``design.svg`` (the fabrication drawing, mm), ``design.png`` (the rest body
 with the routes beside the as-built pose) and ``front.png`` (as-built error
 against tendon count)."""
@@ -26,7 +27,9 @@ from ..extract.consolidation import Layout, finish
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.settings import BUDGET, ConsolidationSettings
 from ..files import check_writable, file_stem, write_json
+from ..extract.realizable import as_built_arrays
 from ..io.drawing import write_svg
+from ..io.export import write_as_built
 from ..io.plots import plot_design, plot_front
 from ..io.progress import Progress
 from ..io.recording import rewrite
@@ -35,7 +38,7 @@ from .extract import Extraction, extract, frictionless_error, log_layout
 from .optimize import RunResult, optimize
 
 #: what the output folder holds
-FILES = ("run.rrd", "run.npz", "design.json", "design.svg", "design.png", "front.png")
+FILES = ("run.rrd", "run.npz", "as_built.npz", "design.json", "design.svg", "design.png", "front.png")
 
 
 def default_out(scene: Scene, level: int) -> Path:
@@ -178,7 +181,9 @@ def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool) 
     title = f"{problem.scene.name} level {problem.level}: {layout.count} tendon(s), as built " \
             f"{100 * layout.error:.2f}% of L"
     paths = {"recording": str(out / "run.rrd"), "export": str(out / "run.npz"), "json": str(out / "design.json"),
-             "svg": str(write_svg(out / "design.svg", problem, tendons, title))}
+             "svg": str(write_svg(out / "design.svg", problem, tendons, title)),
+             "as_built": str(write_as_built(out / "as_built.npz", problem,
+                                            as_built_arrays(problem, tendons, layout.realizable)))}
     if png:
         paths["png"] = str(plot_design(out / "design.png", problem, tendons, layout.realizable, title))
         paths["front_png"] = str(plot_front(out / "front.png", summary["front"], summary["budget"],

@@ -154,7 +154,8 @@ class Walls:
 
     def distance_gradient(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Signed distances (q,) and their gradients (q, 2): the unit vector from the
-        nearest wall point to each point (away from the wall, into the body)."""
+        nearest wall point to each point (away from the wall, into the body); for a
+        point on a wall, the signed distance's central difference."""
         p = np.asarray(points, dtype=float).reshape(-1, 2)
         d = self.distance(p)
         lines = shapely.shortest_line(shapely.points(p), self.boundary)
@@ -162,7 +163,14 @@ class Walls:
         away = p - near
         norm = np.linalg.norm(away, axis=1)
         g = np.where(norm[:, None] > 0, away / np.maximum(norm, 1e-300)[:, None], 0.0)
-        return d, np.where(d[:, None] < 0, -g, g)
+        g = np.where(d[:, None] < 0, -g, g)
+        on = norm <= 1e-12 * max(float(np.ptp(np.asarray(self.boundary.bounds).reshape(2, 2), axis=0).max()), 1e-300)
+        if on.any():
+            h = 1e-7 * float(np.ptp(np.asarray(self.boundary.bounds).reshape(2, 2), axis=0).max())
+            q = p[on]
+            fd = np.stack([(self.distance(q + e) - self.distance(q - e)) / (2 * h) for e in (h * np.eye(2))], 1)
+            g[on] = fd / np.maximum(np.linalg.norm(fd, axis=1), 1e-300)[:, None]
+        return d, g
 
     def polyline_distance(self, points: np.ndarray) -> float:
         """The least distance (m) of a polyline (k, 2) from the walls (its segments

@@ -15,19 +15,21 @@ those routes, capstan friction included (:mod:`.realizable`). Each round tries
 and ranks them by what route optimization minimizes (:mod:`.routing`): the
 as-built pose error squared plus the friction price of the pull the routes
 lose to their bends - so a join that loses more pull than it buys in pose
-ranks below the drop that avoids it. A round first **screens** its candidates
+ranks below the drop that avoids it. The least-cost one within the bound
+below is kept. A round first **screens** its candidates
 by one Gauss-Newton step each from the current layout's solution
 (:func:`~tendon_taichi.extract.realizable.predict_realizable`), then solves
-the ``screen`` best in full (``screen`` 0: every one, unscreened). The best is
-kept when its as-built error is at most the larger of
+the ``screen`` best in full (``screen`` 0: every one, unscreened). The bound
+on the as-built error is the larger of
 
 * the extracted layout's error plus ``tolerance`` x L (cumulative over all
   rounds): a tendon that buys less pose accuracy than that is not worth its
   motor, and
 * ``budget`` x L, the pose error the designer accepts anyway;
 
-when it is outside (by at most a factor REACH), its routes are optimized,
-and it is kept if that brings it within. At the end the routes left are **oriented** (each pulled at the
+when no candidate is within it, the PROBES least costly (within REACH times
+the bound) have their routes optimized, and the first that comes within is
+kept. At the end the routes left are **oriented** (each pulled at the
 end that serves the pose at least cost) and **optimized**: control points,
 anchors, pull ends and contractions together, at most ``refine`` rounds.
 Both bounds and the reach are fractions of the body size, and routes do not
@@ -47,12 +49,14 @@ from ..objective.settings import OptimizeSettings
 from .protocol import IdealizedState, Tendon, turn_angles
 from .realizable import RealizableResult, pose_tension, predict_realizable, solve_realizable_poses, warm_ratios
 from .routes import Route, fit_route, join_routes, keep_clear, sample_count
-from .routing import RouteSettings, optimize_routes
+from .routing import PRICE_PER_BUDGET, RouteSettings, optimize_routes
 from .settings import ConsolidationSettings
 
 
-#: a reduction whose as-built error is at most REACH times the bound is optimized to try to bring it within
-REACH = 2.0
+#: when no reduction fits, the PROBES least-cost ones whose as-built error is at most REACH times the
+#: bound are route-optimized (one round each) to try to bring them within
+REACH = 4.0
+PROBES = 2
 
 
 @dataclass
@@ -195,16 +199,27 @@ class _Search:
         states = self.state.poses or [self.state]
         return np.array([warm_ratios(self.problem, tendons, st, t) for st, t in zip(states, tensions)])
 
-    def best(self, candidates: list[Candidate], now: Layout) -> tuple[Candidate, Layout] | None:
-        """The candidate of least cost, solved in full (after the screen)."""
+    def ranked(self, candidates: list[Candidate], now: Layout) -> list[tuple[Candidate, Layout]]:
+        """The candidates (after the screen) solved in full, least cost first; those
+        that cannot be solved are left out."""
         if self.options.screen and len(candidates) > self.options.screen:
             candidates = self._screened(candidates, now)
-        best = None
-        for c in candidates:
-            lay = self.solve(c.routes, c.start, now)
-            if lay is not None and (best is None or lay.cost < best[1].cost):
-                best = (c, lay)
-        return best
+        solved = [(c, self.solve(c.routes, c.start, now)) for c in candidates]
+        return sorted([s for s in solved if s[1] is not None], key=lambda s: s[1].cost)
+
+    def reduce(self, now: Layout, bound: float) -> tuple[Candidate, Layout] | None:
+        """The next reduction: the least-cost drop or join within ``bound``; when none
+        is, the first of the PROBES least-cost ones (within REACH x bound) that route
+        optimization brings within it; None when no reduction fits."""
+        ranked = self.ranked(self.reductions(now), now)
+        within = [s for s in ranked if s[1].error <= bound]
+        if within:
+            return within[0]
+        for cand, lay in [s for s in ranked if s[1].error <= REACH * bound][:PROBES]:
+            lay = self.optimize(lay, rounds=1)
+            if lay.error <= bound:
+                return cand, lay
+        return None
 
     def _screened(self, candidates: list[Candidate], now: Layout) -> list[Candidate]:
         """The ``screen`` candidates of least cost as one Gauss-Newton step predicts
@@ -276,11 +291,13 @@ class _Search:
             steps.append(Step("route", tuple(range(done.count)), done.count, done.error))
         return replace(done, optimized=True), steps
 
-    def optimize(self, now: Layout) -> Layout:
+    def optimize(self, now: Layout, rounds: int | None = None) -> Layout:
         """The layout's routes and contractions optimized together, at most
-        ``refine`` rounds, while a round lowers the cost; each round starts from the
-        routes resampled for their length and made to keep the clearance."""
-        for k in range(self.options.refine if now.routes else 0):
+        ``rounds`` (default ``refine``) rounds, while a round lowers the cost; each
+        round starts from the routes resampled for their length and made to keep
+        the clearance."""
+        rounds = self.options.refine if rounds is None else min(rounds, self.options.refine)
+        for k in range(rounds if now.routes else 0):
             size = self.problem.size
             routes = [Route(r.control, sample_count(r.length, size), r.tension, r.tension_std, r.source)
                       for r in now.routes]
@@ -341,17 +358,10 @@ def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, 
     bound = max(first.error + options.tolerance, options.budget)
     now = first
     while now.routes:
-        found = search.best(search.reductions(now), now)
+        found = search.reduce(now, bound)
         if found is None:
             break
-        cand, lay = found
-        if lay.error > bound:
-            if lay.error > REACH * bound:  # too far for route optimization to bring it within
-                break
-            lay = search.optimize(lay)
-            if lay.error > bound:
-                break
-        now = lay
+        cand, now = found
         out.steps.append(Step(cand.action, cand.ids, now.count, now.error))
         out.front[now.count] = now
         search.log(f"{source}: {cand.action} -> {now.count} tendon(s), as built {100 * now.error:.2f}% of L")
@@ -373,8 +383,8 @@ def finish(problem: Problem, layout: Layout, state: IdealizedState, settings: Op
 
 
 def route_settings(problem: Problem, options: ConsolidationSettings) -> RouteSettings:
-    """The route optimization's settings: the scene's [tendons] table, and the budget
-    squared as the price of the pull lost to friction (:mod:`.routing`)."""
+    """The route optimization's settings: the scene's [tendons] table, and the price
+    of the pull lost to friction from the budget (:mod:`.routing`)."""
     ts = problem.scene.tendons
-    price = options.budget ** 2 if options.budget > 0 else RouteSettings.friction_price
+    price = PRICE_PER_BUDGET * options.budget ** 2 if options.budget > 0 else RouteSettings.friction_price
     return RouteSettings(friction=ts.friction, clearance=ts.clearance * problem.size, friction_price=price)

@@ -185,3 +185,30 @@ def target_jacobian(ps: PoseSolve, a0: np.ndarray) -> np.ndarray:
             yield b
 
     return np.stack([-ps.problem.target_positions(dx) for dx in ps.sensitivities(rhs(), ADJOINT_TOL)], axis=-1)
+
+
+def as_built_arrays(problem: Problem, tendons: list[Tendon], real: RealizableResult) -> dict:
+    """What the as-built export holds of a solved realizable robot: the waypoints
+    at rest ``waypoints`` (k, 2) m, all tendons one after the other, tendon t's
+    from ``tendon_start[t]`` to ``tendon_start[t+1]``, embedded by ``point_tri``
+    (k,) and ``point_bary`` (k, 3); per pose ``x`` (P, n, 2) m, ``contraction``
+    (P, T) m, ``tension`` (P, T) N at the pull end and ``segment_tension`` (P, S)
+    N (S = k - T segments, in waypoint order); the tendons' ``rest_length`` (T,) m
+    and ``stiffness`` (T,) EA, N."""
+    cables = tendon_cables(problem, tendons)
+    model = Model.from_problem(problem, cables=cables)
+    poses = [real] if real.poses is None else real.poses
+    P, T = len(poses), len(tendons)
+    seg = []
+    for r, ac in zip(poses, np.asarray(real.contraction).reshape(P, T)):
+        model.set_contraction(ac)
+        model.set_positions(r.x)
+        model.update_friction()
+        seg.append(model.segment_tensions())
+    points = cables.points
+    return {"waypoints": np.concatenate([t.waypoints for t in tendons]) if tendons else np.zeros((0, 2)),
+            "tendon_start": np.concatenate([[0], np.cumsum([len(t.waypoints) for t in tendons])]).astype(np.int64),
+            "point_tri": points.tri, "point_bary": points.bary, "x": np.array([r.x for r in poses]),
+            "contraction": np.asarray(real.contraction, dtype=float).reshape(P, T),
+            "tension": np.asarray(real.tau, dtype=float).reshape(P, T), "segment_tension": np.array(seg),
+            "rest_length": cables.a0, "stiffness": cables.stiffness}

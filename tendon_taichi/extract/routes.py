@@ -101,17 +101,18 @@ def resample(points: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def smooth_fit(B: np.ndarray, target: np.ndarray, smoothing: float = FIT_SMOOTHING,
-               ends: np.ndarray | None = None) -> np.ndarray:
-    """Control points (m, 2) with ``B @ control`` nearest ``target`` (k, 2) in the least
-    squares, plus ``smoothing`` times the mean squared second difference of the
-    control points (so a fit does not wiggle); ``ends`` (2, 2), where given, fixes
-    the first and the last control point."""
+               ends: np.ndarray | None = None, weights: np.ndarray | None = None) -> np.ndarray:
+    """Control points (m, 2) with ``B @ control`` nearest ``target`` (k, 2) in the
+    (``weights`` (k,)-weighted) least squares, plus ``smoothing`` times the mean
+    squared second difference of the control points (so a fit does not wiggle);
+    ``ends`` (2, 2), where given, fixes the first and the last control point."""
     n, m = B.shape
     if m == 2 and ends is not None:
         return np.array(ends, dtype=float)
+    W = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
     D = np.diff(np.eye(m), 2, axis=0)
-    A = B.T @ B / n + smoothing * D.T @ D / max(len(D), 1)
-    rhs = B.T @ target / n
+    A = B.T @ (W[:, None] * B) / W.sum() + smoothing * D.T @ D / max(len(D), 1)
+    rhs = B.T @ (W[:, None] * target) / W.sum()
     if ends is None:
         return np.linalg.solve(A, rhs)
     inner, fixed = np.arange(1, m - 1), np.array([0, m - 1])
@@ -141,25 +142,35 @@ def fit_route(points: np.ndarray, size: float, tension: float = 0.0, tension_std
 def _trim_ends(points: np.ndarray, walls: Walls, clearance: float) -> np.ndarray:
     """A polyline (k, 2) with each end that runs head-on into a wall closer than
     ``clearance`` cut back (along the polyline, densely resampled) to where it
-    keeps that clearance; an end that runs along a wall is kept (it is pushed off)."""
+    keeps that clearance; an end that runs along a wall is kept (it is pushed off
+    later). Head-on: going back along the route from the end, the distance from
+    the walls grows at least as fast as along a 45-degree line."""
     dense, _ = resample(points, max(200, 4 * len(points)))
-    d, g = walls.distance_gradient(dense)
+    d = walls.distance(dense)
+    step = float(np.linalg.norm(dense[1] - dense[0]))
     lo, hi = 0, len(dense) - 1
-    for end, inward, step in ((0, 1, 1), (len(dense) - 1, -1, -1)):
-        if d[end] >= clearance:
+    for order in (1, -1):
+        dd = d[::order]
+        if dd[0] >= clearance or step <= 0:
             continue
-        tangent = dense[end] - dense[end + 4 * inward]  # toward the end
-        tangent /= max(np.linalg.norm(tangent), 1e-300)
-        if float(g[end] @ -tangent) < np.cos(np.pi / 4):  # along the wall: pushed off later
+        k = min(8, len(dd) - 1)
+        if (dd[k] - dd[0]) / (k * step) < np.sin(np.pi / 4):  # along the wall
             continue
-        clear = np.flatnonzero(d[::step] >= clearance)
+        clear = np.flatnonzero(dd >= clearance)
         if len(clear):
-            k = clear[0] if step > 0 else len(dense) - 1 - clear[0]
-            lo, hi = (k, hi) if step > 0 else (lo, k)
+            if order > 0:
+                lo = int(clear[0])
+            else:
+                hi = len(dense) - 1 - int(clear[0])
     return dense[lo:hi + 1] if hi - lo >= 2 else points
 
 
-def keep_clear(route: Route, walls: Walls, clearance: float, iterations: int = 30) -> Route | None:
+#: the refit that pushes a route off the walls: a little smoothing, the pushed waypoints held harder
+PUSH_SMOOTHING = 0.005
+PUSH_WEIGHT = 10.0
+
+
+def keep_clear(route: Route, walls: Walls, clearance: float, iterations: int = 40) -> Route | None:
     """The route made to keep ``clearance`` (m) from the walls: an end that runs
     head-on into a wall is cut back along the route (the tendon ends inside the
     body), then the control points are moved (least change, by repeated fits)
@@ -180,9 +191,10 @@ def keep_clear(route: Route, walls: Walls, clearance: float, iterations: int = 3
         short = d < clearance * (1.0 - 1e-6)
         if not short.any():
             return route.with_control(control)
-        # push the short waypoints in by what they lack (and a little more), refit
-        target = pts + np.where(short[:, None], g * (clearance * 1.05 - d)[:, None], 0.0)
-        control = smooth_fit(B, target)
+        # push the short waypoints in by what they lack (and a little more), and refit,
+        # holding the pushed ones harder than the others
+        target = pts + np.where(short[:, None], g * (clearance * 1.1 - d)[:, None], 0.0)
+        control = smooth_fit(B, target, PUSH_SMOOTHING, weights=np.where(short, PUSH_WEIGHT, 1.0))
     return None
 
 

@@ -9,9 +9,9 @@ moved together to minimize
 
 ``Theta_t`` is route t's rest turning (smoothed where it is straight),
 ``theta_j`` the turn at one of its waypoints, ``d_i`` a waypoint's distance
-from the walls and ``c`` the clearance. The friction price ``w_fric`` is the
-budget squared: losing a whole tendon's pull weighs as much as a pose error
-of the whole budget. The gradient
+from the walls and ``c`` the clearance. The friction price ``w_fric`` is
+PRICE_PER_BUDGET times the budget squared: losing a quarter of a tendon's
+pull weighs as much as a pose error of the whole budget. The gradient
 w.r.t. the contractions is the soft IK's; w.r.t. a waypoint's rest position it
 is ``-lambda^T dR/dX`` from the same adjoint solve
 (:func:`~tendon_taichi.physics.waypoints.rest_point_gradient`), and the
@@ -36,8 +36,10 @@ from ..physics.waypoints import rest_point_gradient
 from .realizable import tendon_cables
 from .routes import Route
 
-#: the weight of the friction cost (the default budget, 0.5 % of L, squared)
-FRICTION_PRICE = 0.005 ** 2
+#: the weight of the friction cost, in units of the budget (a fraction of L) squared ...
+PRICE_PER_BUDGET = 4.0
+#: ... and with the default budget, 0.5 % of L
+FRICTION_PRICE = PRICE_PER_BUDGET * 0.005 ** 2
 #: the weight of the clearance penalty
 CLEARANCE_WEIGHT = 1.0e2
 #: the sharpest turn at one waypoint (rad; waypoints are 1.5 % of L apart: a bend

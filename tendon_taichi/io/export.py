@@ -85,3 +85,23 @@ def write_vtu(path: str | Path, problem: Problem, x: np.ndarray, tau: np.ndarray
     with atomic_path(path) as tmp:
         meshio.write(str(tmp), mesh, file_format="vtu")
     return Path(path)
+
+
+def write_as_built(path: str | Path, problem: Problem, tendon_arrays: dict) -> Path:
+    """The as-built robot export (``docs/formats.md``): the body (``nodes``,
+    ``triangles``, ``fixed``, material, targets with ``target_pose``), the
+    tendons' ``friction`` and ``clearance``, and ``tendon_arrays`` (the tendons'
+    embedded waypoints and each pose's equilibrium, contractions and tensions:
+    :func:`~tendon_taichi.extract.realizable.as_built_arrays`)."""
+    mat, ts = problem.material, problem.scene.tendons
+    data = {"nodes": problem.mesh.nodes, "triangles": problem.mesh.triangles, "fixed": problem.fixed,
+            "youngs_modulus": mat.youngs_modulus, "poisson_ratio": mat.poisson_ratio, "thickness": mat.thickness,
+            "density": mat.density, "gravity": np.array(mat.gravity), "target_tri": problem.target.tri,
+            "target_bary": problem.target.bary, "target_goal": problem.target_goal,
+            "target_pose": problem.target_pose, "pose_names": np.array(problem.pose_names),
+            "body_size": problem.size, "friction": ts.friction, "clearance": ts.clearance,
+            "scene_name": problem.scene.name, "resolution": problem.level, **tendon_arrays}
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **data)
+    return Path(path)

@@ -1,0 +1,182 @@
+"""``design`` end to end on a small scene, as a user runs it: every output there,
+design.json as the contract says, the fabrication drawing an SVG with one
+smooth path per tendon inside the body, the as-built equilibrium in force
+balance from its export alone with its tensions following the capstan law,
+the routes in the recording, progress on stderr; the recommendation rule; bad
+values one clear line, nothing written."""
+
+import json
+import re
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+import shapely
+
+from reference import body_forces
+from tendon_taichi.apps.design import recommend
+from tendon_taichi.io.recording import read_chunks, read_recording
+
+SCENE = """
+name = "small finger"
+[body]
+outline = [[0.0, 0.0], [0.07, 0.0], [0.07, 0.016], [0.0, 0.016]]
+max_triangle_area = 1.2e-5
+[fibers]
+spacing = 0.005
+[[fixed]]
+box = [[-0.001, -0.001], [0.004, 0.017]]
+[[targets]]
+point = [0.07, 0.008]
+goal = [0.066, 0.02]
+[tendons]
+friction = 0.15
+"""
+SVG = "{http://www.w3.org/2000/svg}"
+
+
+@pytest.fixture(scope="module")
+def designed(tmp_path_factory):
+    from conftest import run_cli
+
+    d = tmp_path_factory.mktemp("design")
+    (d / "finger.toml").write_text(SCENE)
+    r = run_cli("design", "finger.toml", "--out", "out", "--stage-iterations", "25", "--k-min", "0.1",
+                "--extractors", "strands", "path_cover", "--refine", "1", "--json", "out.json", cwd=d)
+    assert r.returncode == 0, r.stderr
+    return d, r
+
+
+def test_design_writes_every_output_and_nothing_else(designed):
+    d, r = designed
+    assert sorted(p.name for p in (d / "out").iterdir()) == sorted(
+        ["run.rrd", "run.npz", "as_built.npz", "design.json", "design.svg", "design.png", "front.png"])
+    assert sorted(p.name for p in d.iterdir()) == ["finger.toml", "out", "out.json"]
+    summary = json.loads((d / "out" / "design.json").read_text())
+    assert summary == json.loads((d / "out.json").read_text())
+    for key in ("scene", "resolution", "body_size", "friction", "clearance", "budget", "recommended", "front",
+                "time_s"):
+        assert key in summary
+    assert summary["friction"] == 0.15 and summary["clearance"] == 0.02 and summary["budget"] == 0.005
+    rec = summary["recommended"]
+    assert rec["count"] == len(rec["tendons"]) >= 1
+    for t in rec["tendons"]:
+        assert len(t["contraction"]) == 1 and t["tension"] > 0 and 0 < t["capstan"] <= 1
+        assert t["capstan"] == pytest.approx(np.exp(-0.15 * t["turning"]))
+        assert t["waypoints"][0] == t["anchor"] and t["waypoints"][-1] == t["pull_end"]
+    m = rec["metrics"]
+    for key in ("count", "total_length", "total_turning", "max_turn", "kinks", "capstan_worst", "tension_cv",
+                "coverage", "realizable_pose_error_rel", "realizable_pose_error_rel_frictionless", "clearance_min"):
+        assert key in m
+    assert m["clearance_min"] >= 0.02 * summary["body_size"] * (1 - 1e-6)
+    assert [e["count"] for e in summary["front"]] == sorted({e["count"] for e in summary["front"]})
+    for e in summary["front"]:
+        assert set(e) >= {"count", "realizable_pose_error_rel", "capstan_worst", "kinks", "total_length", "source"}
+    # the table on stdout, the stages and the route optimization on stderr
+    assert "recommended:" in r.stdout and re.search(r"tendon 1: .* cm, pull", r.stdout)
+    assert "stage 0" in r.stderr and "design: strands" in r.stderr and "optimizing" in r.stderr
+
+
+def test_the_drawing_has_one_smooth_path_per_tendon_inside_the_body(designed):
+    d, _ = designed
+    summary = json.loads((d / "out" / "design.json").read_text())
+    root = ET.parse(d / "out" / "design.svg").getroot()
+    assert root.tag == f"{SVG}svg" and root.get("width").endswith("mm")
+    routes = [p for p in root.iter(f"{SVG}path") if p.get("class") == "route"]
+    assert len(routes) == summary["recommended"]["count"]
+    assert len([c for c in root.iter(f"{SVG}circle") if c.get("class") == "anchor"]) == len(routes)
+    body_d = next(p for p in root.iter(f"{SVG}path") if p.get("id") == "body").get("d")
+    outline = np.array([[float(v) for v in xy.split(",")] for xy in re.findall(r"-?[\d.]+,-?[\d.]+", body_d)])
+    body = shapely.Polygon(outline)
+    clearance_mm = 1e3 * 0.02 * summary["body_size"]
+    for path in routes:
+        cmd = path.get("d")
+        assert cmd.startswith("M ") and " C " in cmd  # a smooth path: cubic Bezier segments
+        pts = np.array([[float(v) for v in xy.split(",")] for xy in re.findall(r"-?[\d.]+,-?[\d.]+", cmd)])
+        start, pieces = pts[0], pts[1:].reshape(-1, 3, 2)
+        u = np.linspace(0, 1, 11)[:, None]
+        p0 = start
+        for c1, c2, p3 in pieces:
+            curve = (1 - u) ** 3 * p0 + 3 * u * (1 - u) ** 2 * c1 + 3 * u * u * (1 - u) * c2 + u ** 3 * p3
+            assert body.contains(shapely.MultiPoint(curve))
+            assert shapely.distance(shapely.MultiPoint(curve), body.boundary) >= 0.99 * clearance_mm
+            p0 = p3
+
+
+def test_as_built_equilibrium_balances_forces_from_its_export_alone(designed):
+    """The body's elastic forces (reference Neo-Hookean) and the exported segment
+    tensions along the exported deformed waypoints sum to zero on the free nodes,
+    and the tensions drop from the pull end by exp(-mu Theta_s), Theta_s the
+    turning between segment s and the pull end (the export's positions)."""
+    d, _ = designed
+    a = np.load(d / "out" / "as_built.npz")
+    X, T, fixed, x = a["nodes"], a["triangles"], a["fixed"].astype(bool), a["x"][0]
+    f = body_forces(X, T, x, float(a["youngs_modulus"]), float(a["poisson_ratio"]), float(a["thickness"]))
+    start, tri, bary = a["tendon_start"], a["point_tri"], a["point_bary"]
+    points = np.einsum("kj,kjd->kd", bary, x[T[tri]])
+    seg_t = a["segment_tension"][0]
+    mu = float(a["friction"])
+    s = 0
+    for t in range(len(start) - 1):
+        w = points[start[t]:start[t + 1]]
+        dvec = np.diff(w, axis=0)
+        n = dvec / np.linalg.norm(dvec, axis=1, keepdims=True)
+        tens = seg_t[s:s + len(dvec)]
+        turn = np.abs(np.arctan2(dvec[:-1, 0] * dvec[1:, 1] - dvec[:-1, 1] * dvec[1:, 0],
+                                 (dvec[:-1] * dvec[1:]).sum(1)))
+        theta = np.r_[np.cumsum(turn[::-1])[::-1], 0.0]  # turning from each segment to the pull end
+        assert tens[-1] == pytest.approx(a["tension"][0, t], rel=1e-12)
+        assert np.allclose(tens, tens[-1] * np.exp(-mu * theta), rtol=1e-9)
+        for i, ni in enumerate(n):  # segment i pulls its ends together
+            for point, sign in ((start[t] + i + 1, 1.0), (start[t] + i, -1.0)):
+                for k in range(3):
+                    f[T[tri[point], k]] += sign * bary[point, k] * tens[i] * ni
+        s += len(dvec)
+    scale = np.abs(seg_t).max()
+    assert scale > 0 and np.abs(f[~fixed]).max() <= 1e-7 * scale
+
+
+def test_the_routes_are_in_the_recording(designed):
+    d, _ = designed
+    run = read_recording(d / "out" / "run.rrd")
+    assert run.stages
+    chunks, _ = read_chunks(d / "out" / "run.rrd")
+    paths = {c.entity_path for c in chunks}
+    assert {"/design/routes/rest", "/design/routes/realizable/tendons", "/design/summary"} <= paths
+
+
+def _entry(count, error, capstan, length):
+    return ({"count": count, "realizable_pose_error_rel": error, "capstan_worst": capstan, "total_length": length},
+            f"{count}-{error}-{capstan}-{length}")
+
+
+def test_recommendation_is_the_fewest_tendons_within_the_budget():
+    entries = [_entry(3, 0.001, 0.9, 0.2), _entry(2, 0.004, 0.80, 0.15), _entry(2, 0.0045, 0.85, 0.18),
+               _entry(2, 0.0046, 0.85, 0.12), _entry(1, 0.02, 1.0, 0.1)]
+    assert recommend(entries, 0.005, None)[1] == "2-0.0046-0.85-0.12"  # capstan first, then length
+    assert recommend(entries, 0.0042, None)[1] == "2-0.004-0.8-0.15"
+    assert recommend(entries, 0.003, None)[1] == "3-0.001-0.9-0.2"
+    assert recommend(entries, 0.0005, None)[1] == "3-0.001-0.9-0.2"  # none within: the lowest error
+    assert recommend(entries, 0.005, 1)[1] == "1-0.02-1.0-0.1"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--friction", "-0.1"], "--friction must be a number in [0, 2]"),
+    (["--friction", "nan"], "--friction must be a number in [0, 2]"),
+    (["--clearance", "0.5"], "--clearance must be a number in [0, 0.2]"),
+    (["--budget", "0"], "--budget must be a fraction of L in (0, 1)"),
+    (["--max-tendons", "0"], "--max-tendons must be an integer >= 1"),
+])
+def test_bad_values_give_one_line_and_write_nothing(cli, tmp_path, args, message):
+    r = cli("design", "t_shape", "--out", "out", *args, cwd=tmp_path)
+    assert r.returncode == 2 and r.stdout == ""
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("tendon-taichi: error: ") and message in lines[0], r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_tendons_table_is_a_scene_error(cli, tmp_path):
+    (tmp_path / "s.toml").write_text(SCENE.replace("friction = 0.15", "friction = 3.0"))
+    r = cli("design", "s.toml", "--out", "out", cwd=tmp_path)
+    assert r.returncode == 2 and "tendons.friction must be <= 2" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]

@@ -1,0 +1,150 @@
+"""Smooth routes off the lattice: a zig-zag becomes the line it approximates,
+splines become exact Bezier paths, the clearance is held, a join across a
+body with a hole is smooth or not made, and the route gradient (control
+points, anchor and pull end, contractions) matches central differences - with
+friction, the bend penalty and the clearance penalty all active."""
+
+import numpy as np
+import pytest
+
+from tendon_taichi import build_problem, load_scene, parse_scene
+from tendon_taichi.body.spline import basis, bezier_pieces
+from tendon_taichi.extract.protocol import turn_angles
+from tendon_taichi.extract.routes import Route, fit_route, join_routes, keep_clear, sample_count
+from tendon_taichi.extract.routing import MAX_BEND, RouteObjective, RouteSettings, sharp_bends, turning
+
+RING = """
+name = "ring"
+[body]
+outline = [[-0.05, 0.0], [0.05, 0.0], [0.05, 0.08], [-0.05, 0.08]]
+holes = [[[-0.02, 0.025], [0.02, 0.025], [0.02, 0.055], [-0.02, 0.055]]]
+[[fixed]]
+box = [[-0.06, -0.001], [0.06, 0.004]]
+[[targets]]
+point = [0.0, 0.08]
+goal = [0.01, 0.075]
+"""
+
+
+def test_a_lattice_zigzag_becomes_the_line_it_follows():
+    """45-degree steps either side of a straight line: the fitted route runs along
+    it (within one step), about as long as the line, with no turn to speak of."""
+    s = 0.005
+    steps = np.array([[i * s, (i % 2) * s] for i in range(13)])
+    r = fit_route(steps, size=0.1)
+    assert np.allclose(r.control[[0, -1]], steps[[0, -1]])  # anchor and pull end held
+    w = r.waypoints
+    chord = np.linalg.norm(steps[-1] - steps[0])
+    assert r.length <= 1.02 * chord < np.linalg.norm(np.diff(steps, axis=0), axis=1).sum() / 1.35
+    assert np.abs(w[:, 1]).max() <= s
+    assert np.degrees(turn_angles(w)).max() < 10.0 and np.degrees(turn_angles(w)).sum() < 60.0
+    assert turn_angles(steps).sum() > 10 * np.pi / 2  # the zig-zag itself turned 90 degrees at every step
+
+
+def test_spline_samples_and_bezier_pieces_are_the_same_curve():
+    rng = np.random.default_rng(3)
+    for m in (2, 3, 4, 7):
+        control = rng.standard_normal((m, 2))
+        pieces = bezier_pieces(control)
+        B = basis(9, m)
+        assert np.allclose(B.sum(axis=1), 1.0) and np.allclose(B @ control, basis(9, m) @ control)
+        assert np.allclose(pieces[0, 0], control[0]) and np.allclose(pieces[-1, -1], control[-1])
+        # the pieces join continuously and, being uniform, sample the same points as the basis
+        assert np.allclose(pieces[1:, 0], pieces[:-1, -1])
+        u = np.linspace(0, 1, len(pieces) + 1)
+        assert np.allclose(basis(len(u), m) @ control, np.vstack([pieces[:, 0], pieces[-1:, -1]]))
+
+
+def test_clearance_is_held():
+    p = build_problem(parse_scene(RING), 1)
+    c = 0.02 * p.size
+    # along the outer wall, into the hole, and head-on into the bottom wall
+    for path in ([[-0.045, 0.0785], [0.0, 0.0790], [0.045, 0.0785]],
+                 [[-0.04, 0.012], [-0.018, 0.03], [-0.04, 0.05]],
+                 [[0.035, 0.06], [0.035, 0.03], [0.035, 0.0]]):
+        assert p.walls.distance(fit_route(np.array(path), p.size).waypoints).min() < c
+        r = keep_clear(fit_route(np.array(path), p.size), p.walls, c)
+        assert r is not None
+        assert p.walls.distance(r.waypoints).min() >= c * (1 - 1e-6)
+        assert p.walls.polyline_distance(r.waypoints) >= 0.99 * c
+        assert np.degrees(turn_angles(r.waypoints)).max() < 30.0
+    # where the body is narrower than twice the clearance, no route fits
+    assert keep_clear(fit_route(np.array([[-0.04, 0.03], [-0.04, 0.05]]), p.size), p.walls, 0.2 * p.size) is None
+
+
+def test_a_join_across_a_body_with_a_hole_is_smooth_or_not_made():
+    """Two routes either side of a hole, ends facing across it: the join goes round
+    the hole, keeps the clearance and has no kink - or it is not made."""
+    p = build_problem(parse_scene(RING), 1)
+    c = 0.02 * p.size
+    left = keep_clear(fit_route(np.array([[-0.035, 0.01], [-0.035, 0.04], [-0.03, 0.07]]), p.size), p.walls, c)
+    right = keep_clear(fit_route(np.array([[0.03, 0.012], [0.035, 0.04], [0.035, 0.07]]), p.size), p.walls, c)
+    made = 0
+    for a, b in ((left, right), (left.reversed(), right), (left, right.reversed()),
+                 (left.reversed(), right.reversed())):
+        joined = keep_clear(join_routes(a, b, p.size), p.walls, c)
+        if joined is None:
+            continue
+        made += 1
+        w = joined.waypoints
+        assert p.walls.distance(w).min() >= c * (1 - 1e-6)
+        assert p.walls.polyline_distance(w) > 0  # never through the hole
+        assert np.degrees(turn_angles(w)).max() < 30.0
+    assert made >= 1
+
+
+def test_turning_and_bend_penalties_match_finite_differences():
+    rng = np.random.default_rng(1)
+    pts = np.cumsum(rng.uniform(0.5, 1.0, (9, 2)) * [[1, 0.8]], axis=0) * 0.01
+    pts[4] += [0.0, 0.01]  # one sharp bend
+    for fn in (turning, lambda q: sharp_bends(q, MAX_BEND)):
+        f, g = fn(pts)
+        h = 1e-7
+        fd = np.zeros_like(pts)
+        for i in range(len(pts)):
+            for d in range(2):
+                e = np.zeros_like(pts)
+                e[i, d] = h
+                fd[i, d] = (fn(pts + e)[0] - fn(pts - e)[0]) / (2 * h)
+        assert np.abs(g - fd).max() <= 1e-6 * np.abs(fd).max()
+    assert sharp_bends(pts, MAX_BEND)[0] > 0
+
+
+def test_route_gradient_matches_central_differences():
+    """d O / d (control points, anchor and pull end included, and contractions) of
+    the route objective - the as-built pose with friction, the friction price, the
+    bend and clearance penalties - against central differences."""
+    p = build_problem(load_scene("t_shape"), 1)
+    L = p.size
+    t = np.linspace(0, 1, 12)
+    paths = [np.stack([0.04 * t, 0.075 - 0.004 * np.sin(np.pi * t)], 1),
+             np.stack([0.004 * np.sin(3 * t), 0.01 + 0.05 * t], 1)]
+    routes = [fit_route(q, L, 0.4) for q in paths]
+    routes[1].control[2:4] += [[0.015, 0.0], [-0.015, 0.0]]  # a sharp bend (the penalty is on) ...
+    routes[0].control[-1] = [0.045, 0.0785]  # ... and a pull end too near the wall (the clearance term is on)
+    rs = RouteSettings(friction=0.3, clearance=0.02 * L, friction_price=1e-4)
+    obj = RouteObjective(p, routes, p.scene.optimize, rs, "direct")
+    obj.eval_tol = 1e-14
+    assert sum(sharp_bends(r.waypoints)[0] for r in routes) > 0
+    assert p.walls.distance(routes[0].waypoints).min() < rs.clearance
+    z = obj.pack(routes, np.array([[0.08, 0.05]]))
+    f, g = obj.evaluate(z)
+    n = obj.n_control
+    ends = [0, 1, n // 2 - 2, n // 2 - 1, n // 2, n - 2, n - 1]  # anchors and pull ends
+    inner = [4, 7, n // 2 + 5]
+    for j in ends + inner + [n, n + 1]:
+        h = 1e-6
+        e = np.zeros_like(z)
+        e[j] = h
+        fd = (obj.evaluate(z + e)[0] - obj.evaluate(z - e)[0]) / (2 * h)
+        assert g[j] == pytest.approx(fd, rel=2e-5, abs=1e-9 * np.abs(g).max()), j
+
+
+def test_routes_do_not_depend_on_the_mesh():
+    """How many waypoints and control points a route has depends on its length and
+    the body size, not on the resolution level."""
+    pts = np.array([[0.0, 0.0], [0.03, 0.01], [0.06, 0.0]])
+    a, b = fit_route(pts, 0.128), fit_route(pts, 0.128)
+    assert a.samples == b.samples == sample_count(a.length, 0.128)
+    assert np.array_equal(a.control, b.control)
+    assert isinstance(a, Route)
