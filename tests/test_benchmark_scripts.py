@@ -45,7 +45,7 @@ def test_how_it_works_draws_five_panels(tmp_path):
     png = tmp_path / "h.png"
     r = run(BENCH / "how_it_works" / "make_figure.py", "t_shape_planted_1t_s1", "--level", 1,
             "--stage-iterations", 30, "--out", png)
-    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "tendons, realizable" in r.stderr
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "tendons from" in r.stderr and "as built" in r.stderr
     from PIL import Image
     with Image.open(png) as im:
         assert "commit" in im.info["Comment"]  # the picture records what made it
@@ -102,7 +102,7 @@ def test_reextract_reproduces_the_run(planted_results, tmp_path):
     src = planted_results / "runs" / "r1" / "planted_bench.json"
     run(BENCH / "planted" / "reextract.py", src, tmp_path / "re.json")
     (before,), (after,) = json.loads(src.read_text())["cases"], json.loads((tmp_path / "re.json").read_text())["cases"]
-    for key in ("count", "best", "realizable_pose_error_rel", "kinks", "passed"):
+    for key in ("count", "best", "realizable_pose_error_rel", "kinks", "capstan_worst", "passed"):
         assert after[key] == before[key], key
 
 

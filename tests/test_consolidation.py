@@ -3,8 +3,8 @@ smooth route, a useless tendon is dropped and needed ones kept, the tolerance
 bounds the pose lost and a negative one keeps the fitted routes, the budget
 buys fewer tendons within it, a candidate that cannot be solved is skipped, the
 Gauss-Newton screen keeps the same steps as solving every candidate, route
-optimization grows a cut tendon back; the screen's target Jacobian matches
-finite differences and its step reaches a reachable pose.
+optimization regains the pose a cut tendon lost; the screen's target Jacobian
+matches finite differences and its step reaches a reachable pose.
 
 The goals are made by two straight tendons (which a smooth route follows
 exactly), without friction, and the problem has none."""
@@ -173,22 +173,23 @@ def test_the_screen_keeps_the_steps_of_solving_every_candidate(straight):
     assert reductions[0] == reductions[1] and reductions[0]
 
 
-def test_route_optimization_grows_a_cut_tendon_back(straight):
-    """The straight planted tendon with its last third cut off: no reduction fits
-    (tolerance 0); optimizing the routes moves its end back out along the arm and
-    regains most of the pose."""
+def test_route_optimization_regains_the_pose_of_a_cut_tendon(straight):
+    """The arm's planted tendon with its last three fibers cut off: no reduction
+    fits (tolerance 0); optimizing the routes - their control points, anchors and
+    pull ends, with the contractions - regains the pose lost to the cut, and the
+    routes stay smooth and clear of the walls."""
     p, paths, eq = straight
     st = _state(p, eq, paths)
     f = list(paths[0])
     tendons = _tendons(p, [paths[1], f[:-3]], st)
     fitted = _run(p, tendons, st, tol=0.0, refine=0)
     grown = _run(p, tendons, st, tol=0.0, refine=2)
-    assert fitted.layout.count == grown.layout.count == 2
-    assert [s.action for s in grown.steps][-1] == "route"
-    assert grown.realizable.pose_error_rel < 0.5 * fitted.realizable.pose_error_rel
-    assert grown.route_evaluations > 0
-    reach = [min(r.waypoints[:, 0]) for r in (fitted.layout.routes[1], grown.layout.routes[1])]
-    assert reach[1] < reach[0] - 0.002  # the cut end moved back along the arm (by more than a waypoint spacing)
+    assert fitted.layout.count == grown.layout.count == 2 and _actions(grown) == []
+    assert [s.action for s in grown.steps][-1] == "route" and grown.route_evaluations > 0
+    assert grown.realizable.pose_error_rel < 0.2 * fitted.realizable.pose_error_rel
+    for r in grown.layout.routes:
+        assert p.walls.distance(r.waypoints).min() >= 0.02 * p.size * (1 - 1e-6)
+        assert np.degrees(turn_angles(r.waypoints)).max() < 20.0
 
 
 def _planted_tendons(p, paths):

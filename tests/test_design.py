@@ -180,3 +180,15 @@ def test_bad_tendons_table_is_a_scene_error(cli, tmp_path):
     r = cli("design", "s.toml", "--out", "out", cwd=tmp_path)
     assert r.returncode == 2 and "tendons.friction must be <= 2" in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
+
+
+def test_tendon_settings_given_on_the_command_line_reach_the_recording(tmp_path):
+    """A --friction or --clearance that replaces the scene's is what the run's
+    recording rebuilds its problem with (extraction and design read it back)."""
+    from tendon_taichi import load_scene, optimize
+    from tendon_taichi.body.scene import with_overrides
+
+    scene = with_overrides(load_scene("finger"), {"stage_iterations": 3, "k_min": 0.5})
+    run = optimize(scene.with_tendons(friction=0.0, clearance=0.05), 1, record=tmp_path / "run.rrd")
+    ts = read_recording(run.recording).problem().scene.tendons
+    assert (ts.friction, ts.clearance) == (0.0, 0.05) and scene.tendons.friction == 0.1

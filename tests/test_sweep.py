@@ -28,6 +28,8 @@ extractors = ["strands", "path_cover"]
 sparsity = [1.0e-4, 3.0e-4]
 [set]
 stage_iterations = 15
+[consolidation]
+refine = 0
 """
 
 
@@ -41,8 +43,8 @@ def _leaves(prefix, value, out):
 
 
 def figures(row: dict) -> dict:
-    """Every number of a case's optimize and extract figures, except timings."""
-    return _leaves("optimize", row["optimize"], _leaves("extract", row["extract"], {}))
+    """Every number of a case's optimize, extract and design figures, except timings."""
+    return _leaves("optimize", row["optimize"], _leaves("extract", row["extract"], _leaves("design", row["design"], {})))
 
 
 def assert_same_figures(rows: list[dict], reference: dict[str, dict]) -> None:
@@ -67,7 +69,8 @@ def in_process(sweep_file, tmp_path_factory):
     """The figures of every case, each run by sweep.run_case in this process."""
     sw = load_sweep(sweep_file)
     out = tmp_path_factory.mktemp("one-by-one")
-    return {c.id: figures(run_case(c.scene, c.level, sw.solver, sw.extractors, str(out / c.id))) for c in sw.cases}
+    return {c.id: figures(run_case(c.scene, c.level, sw.solver, sw.extractors, str(out / c.id), sw.consolidation))
+            for c in sw.cases}
 
 
 def _sweep(sweep_file, out, *extra, timeout=600):
@@ -78,8 +81,17 @@ def _sweep(sweep_file, out, *extra, timeout=600):
     return result, r.stderr
 
 
+def test_a_sweep_may_vary_the_tendon_friction():
+    sw = parse_sweep({"scenes": ["finger"], "grid": {"friction": [0.0, 0.2]}, "set": {"clearance": 0.03}})
+    assert [(c.scene.tendons.friction, c.scene.tendons.clearance) for c in sw.cases] == [(0.0, 0.03), (0.2, 0.03)]
+    assert sw.cases[0].scene.optimize == sw.cases[1].scene.optimize and sw.cases[0].id != sw.cases[1].id
+    over = parse_sweep({"scenes": ["finger"]}, tendons={"friction": 0.3, "clearance": None})
+    assert over.cases[0].scene.tendons.friction == 0.3 and over.cases[0].id != sw.cases[0].id
+
+
 def test_expansion_and_ids(sweep_file):
     sw = load_sweep(sweep_file)
+    assert sw.consolidation == {"refine": 0}
     assert len(sw.cases) == 4
     assert [(c.scene.name, c.settings["sparsity"]) for c in sw.cases] == [
         ("t_shape", 1e-4), ("t_shape", 3e-4), ("finger", 1e-4), ("finger", 3e-4)]
@@ -102,6 +114,9 @@ def test_expansion_and_ids(sweep_file):
     ({"scenes": ["t_shape"], "grid": {"sparsity": [-1.0]}}, "sparsity"),
     ({"scenes": ["t_shape"], "grid": {"sparsity": [1e-4]}, "set": {"sparsity": 1e-4}}, "both in [grid] and in [set]"),
     ({"scenes": ["t_shape"], "solver": "lu"}, "'solver' must be one of"),
+    ({"scenes": ["t_shape"], "consolidation": {"refine": -1}}, "consolidation.refine must be an integer >= 0"),
+    ({"scenes": ["t_shape"], "consolidation": {"rounds": 1}}, "unknown consolidation setting 'rounds'"),
+    ({"scenes": ["t_shape"], "grid": {"friction": [0.1, -0.1]}}, "tendons.friction must be"),
 ])
 def test_bad_sweep_files_are_rejected(doc, message):
     with pytest.raises((InputError, SceneError), match=message.replace("[", r"\[").replace("]", r"\]")):
@@ -142,7 +157,8 @@ def test_local_cluster_matches_one_by_one_and_reruns_reuse(sweep_file, in_proces
         assert [e["name"] for e in compare["extractors"]] == ["strands", "path_cover"]
     header = (out / "sweep.csv").read_text().splitlines()[0].split(",")
     assert {"case", "settings.sparsity", "optimize.pose_error_rel", "extract.strands.count",
-            "extract.path_cover.realizable_pose_error_rel", "time_s"} <= set(header)
+            "extract.path_cover.realizable_pose_error_rel", "design.count", "design.capstan_worst",
+            "time_s"} <= set(header)
     assert (out / "sweep.png").read_bytes()[:4] == b"\x89PNG"
     _check_figure(result)
 
@@ -242,7 +258,7 @@ def test_a_failing_case_is_recorded_and_the_sweep_goes_on(tmp_path):
     (tmp_path / "bad.toml").write_text(text.replace("point = [0.10, 0.01]", "point = [0.50, 0.01]")
                                        .replace('name = "finger"', 'name = "finger_bad"'))
     (tmp_path / "s.toml").write_text('scenes = ["finger", "bad.toml"]\nextractors = ["strands"]\n'
-                                     '[set]\nstage_iterations = 5\n')
+                                     '[set]\nstage_iterations = 5\n[consolidation]\nrefine = 0\n')
     out = tmp_path / "out"
     r = run_cli("sweep", tmp_path / "s.toml", "--out", out, "--workers", "0", "--json")
     assert r.returncode == 4, r.stderr  # finished, with a failed case

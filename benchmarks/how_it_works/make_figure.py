@@ -1,14 +1,14 @@
 """The README's "how it works" picture: one planted case, from the planted tendons
-to the realizable robot.
+to the as-built robot of the recommended design.
 
 Usage: python benchmarks/how_it_works/make_figure.py [CASE] [--level N] [--out PNG]
        [--stage-iterations N] [--k-min K]
-(default: t_shape_planted_2t_s2 at level 2, about a minute). Optimizes the
-planted scene with the default settings (or these two overridden, for a quick
-look), runs every extractor on the last stage, each followed by consolidation,
-picks the one planted-bench would (the lowest realizable pose error among those
-with at most planted + 1 tendons) and writes how_it_works.png beside this file
-(or to --out); the PNG records the commit that made it.
+(default: t_shape_planted_2t_s2 at level 2, a few minutes). Runs the design
+pipeline on the planted scene with the default settings (or these two
+overridden, for a quick look): optimize, every extractor on the last stage,
+consolidation and route optimization, the recommended design; and writes
+how_it_works.png beside this file (or to --out); the PNG records the commit
+that made it.
 """
 
 import argparse
@@ -16,12 +16,12 @@ import json
 import sys
 import tempfile
 from pathlib import Path
+from types import SimpleNamespace
 
 from tendon_taichi import load_scene
 from tendon_taichi.apps.case import run_case
 from tendon_taichi.body.scene import with_overrides
 from tendon_taichi.io.plots import plot_story
-from tendon_taichi.planted.bench import best_extractor
 
 HERE = Path(__file__).resolve().parent
 SUITE = HERE.parent / "planted"
@@ -39,18 +39,18 @@ def main():
     scene = with_overrides(load_scene(SUITE / f"{args.case}.toml"),
                            {"stage_iterations": args.stage_iterations, "k_min": args.k_min})
     with tempfile.TemporaryDirectory() as tmp:
-        case = run_case(scene, args.level, Path(tmp) / "run.rrd", log_tendons=False)
-    run, ex = case.run, case.extraction
+        design = run_case(scene, args.level, Path(tmp) / "design")
+    run, rec = design.run, design.summary["recommended"]
     s0, final = run.stages[0], run.stages[-1]
-    metrics = {r.name: r.metrics for r in ex.results if r.error is None}
-    best = next(r for r in ex.results if r.name == best_extractor(metrics, len(layout["tendons"])))
+    shown = SimpleNamespace(name=f"design, from {rec['source']}", metrics=rec["metrics"],
+                            tendons=design.layout.tendons(), realizable=design.layout.realizable)
     st = run.problem.scene.optimize
     out = plot_story(args.out, run.problem, layout, (s0.x, s0.tau, s0.figures),
-                     (final.x, final.tau, final.figures), best, st.active_threshold * st.tension_scale,
+                     (final.x, final.tau, final.figures), shown, st.active_threshold * st.tension_scale,
                      st.tension_scale)
     print(f"{out}: stage 0 {s0.figures.active_fibers} active, final {final.figures.active_fibers} active; "
-          f"{best.name}: {best.metrics['count']} tendons, realizable "
-          f"{100 * best.metrics['realizable_pose_error_rel']:.2f}% of L", file=sys.stderr)
+          f"design: {rec['count']} tendons from {rec['source']}, as built "
+          f"{100 * rec['metrics']['realizable_pose_error_rel']:.2f}% of L", file=sys.stderr)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Tendon counts of the best extractor per case across resolution levels.
+"""Tendon counts of the recommended design per case across resolution levels.
 
 Usage: python benchmarks/planted/counts_by_level.py L1.json L2.json L3.json
 (each the planted_bench.json of `tendon-taichi planted-bench --resolution N`).

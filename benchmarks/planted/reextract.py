@@ -1,19 +1,21 @@
-"""Re-extract a finished planted-bench run with this code's consolidation.
+"""Design again from a finished planted-bench run's recordings, with this code.
 
 Usage: python benchmarks/planted/reextract.py RUN.json OUT.json [--refine N] [--screen N] [--budget F]
        [--cases NAME ...] [--bench-dir DIR]
 
 RUN.json is the planted_bench.json of `tendon-taichi planted-bench`; its cases'
-recordings are extracted again (every extractor, consolidation with the run's
-bounds, or ``--budget F`` as its pose budget, ``--refine N`` refinement steps and ``--screen N``),
-without optimizing again, and
-scored by the bench's own rules (best extractor, pass). OUT.json has the same
-shape (``cases``, ``totals``; ``time_s`` is the extraction time), so
-counts_by_level.py reads it. ``--bench-dir DIR`` also writes the result as a
-planted-bench run (planted_bench.json, .csv, gallery.png), each case's
-``time_s`` its recorded optimize time plus the new extraction time (``extract_s``):
-what `tendon-taichi planted-bench` would give with this code, as the
-optimizer's output does not change. Progress goes to stderr.
+recordings are extracted again (every extractor, consolidation and route
+optimization with the run's settings, or ``--budget F`` as the pose budget,
+``--refine N`` rounds of route optimization and ``--screen N``), and the
+design is recommended again, without optimizing again, and scored by the
+bench's own rules. OUT.json has the same shape (``cases``, ``totals``;
+``time_s`` is the extraction time), so counts_by_level.py reads it.
+``--bench-dir DIR`` also writes the result as a planted-bench run
+(planted_bench.json, .csv, gallery.png), each case's ``time_s`` its recorded
+optimize time plus the new extraction time (``extract_s``): what
+`tendon-taichi planted-bench` would give with this code, as the optimizer's
+output does not change. Nothing is written into the recordings. Progress goes
+to stderr.
 """
 
 import argparse
@@ -22,16 +24,16 @@ import sys
 import time
 from pathlib import Path
 
+from tendon_taichi.apps.design import recommended
 from tendon_taichi.extract.settings import REFINE, SCREEN, ConsolidationSettings
-from tendon_taichi.planted.bench import load_suite, score_extraction, totals, write_outputs
-from tendon_taichi.apps.extract import extract
+from tendon_taichi.planted.bench import load_suite, score_design, totals, write_outputs
 
 
 def rescore(case: dict, consolidation: ConsolidationSettings) -> dict:
-    """The case with its extractors re-run on its recording and re-scored."""
+    """The case designed again from its recording and scored again."""
     t0 = time.perf_counter()
-    ex = extract(case["recording"], record=False, consolidation=consolidation)
-    figures = score_extraction(ex, case["planted_count"], case["length_ratio"])
+    _, _, summary = recommended(case["recording"], consolidation.budget or 0.005, consolidation=consolidation)
+    figures = score_design(summary, case["planted_count"], case["length_ratio"])
     return {**case, **figures, "time_s": time.perf_counter() - t0}
 
 
@@ -56,9 +58,10 @@ def main(argv=None):
             continue
         cases.append(rescore(c, consolidation))
         n = cases[-1]
-        print(f"{n['case']}: {n['count']}/{n['planted_count']} tendons ({n['best']}), realizable "
-              f"{100 * n['realizable_pose_error_rel']:.2f}%, {'pass' if n['passed'] else 'miss'}, "
-              f"{n['time_s']:.0f} s", file=sys.stderr, flush=True)
+        print(f"{n['case']}: {n['count']}/{n['planted_count']} tendons ({n['best']}), as built "
+              f"{100 * n['realizable_pose_error_rel']:.2f}%, capstan {n['capstan_worst']:.2f} (planted "
+              f"{n['planted_capstan_worst']:.2f}), {'pass' if n['passed'] else 'miss'}, {n['time_s']:.0f} s",
+              file=sys.stderr, flush=True)
         out = {**src, "consolidation": chosen,
                "cases": cases, "totals": totals(cases)}
         with open(args.out, "w") as f:

@@ -6,11 +6,11 @@ Usage: python benchmarks/planted_results/make_results.py [--levels 1 2 3] [--out
 For each level, runs `tendon-taichi planted-bench benchmarks/planted --resolution
 LEVEL --out RUNS/rLEVEL` (default settings, or the [optimize] settings given by
 --set; finished cases in RUNS are reused), then writes into DIR (default: this
-folder) planted_bench_level<LEVEL>.csv, gallery_level2.png (when level 2 is run),
+folder) planted_bench_level<LEVEL>.csv, gallery_level<LEVEL>.png,
 counts_by_level.md (benchmarks/planted/counts_by_level.py's table) and
 README.md, the results page: per level the suite's figures, per case its
 figures at every level, and the commit that made them. The default run (levels
-1-3, 16 cases) takes about an hour and a half on 2 cores.
+1-3, 16 cases) takes a few hours on 2 cores.
 """
 
 import argparse
@@ -20,7 +20,7 @@ import sys
 import tomllib
 from pathlib import Path
 
-from tendon_taichi.planted.bench import run_suite
+from tendon_taichi.planted.bench import route_rule, run_suite
 from tendon_taichi.version import provenance
 
 HERE = Path(__file__).resolve().parent
@@ -31,15 +31,19 @@ import counts_by_level  # noqa: E402  (a script beside the suite)
 INTRO = """# Planted-suite results
 
 `tendon-taichi planted-bench` (see `docs/cli.md`) on the suite in
-`benchmarks/planted` with the default settings, consolidation included, at
-each resolution level. Everything in this folder is written by
-`python benchmarks/planted_results/make_results.py`; do not edit it by hand.
-A case passes when its best extractor (the lowest realizable pose error among
-those finding at most planted + 1 tendons) finds at most planted + 1 tendons,
-its realizable robot reaches the goals within 1 % of L and the active length is
-at most twice the planted one. Per case: `planted_bench_level<N>.csv`; the
-level-2 gallery: `gallery_level2.png` (planted tendons dashed, found ones in
-colour); the count at every level: `counts_by_level.md`.
+`benchmarks/planted` with the default settings - the `design` pipeline:
+optimize, every extractor, consolidation and route optimization on the
+as-built robot (capstan friction mu = 0.1, clearance 2 % of L), the
+recommended design - at each resolution level. Everything in this folder is
+written by `python benchmarks/planted_results/make_results.py`; do not edit it
+by hand. A case passes when the recommended design has at most planted + 1
+tendons, its as-built robot reaches the goals within 1 % of L and the active
+length is at most twice the planted one; it meets the route rule when its
+worst capstan factor is at least the planted tendons' minus 0.05 (same mu) and
+it has no more kinks than they have. Per case: `planted_bench_level<N>.csv`;
+the galleries `gallery_level<N>.png` (planted tendons dashed, the design's
+routes in colour, anchor a circle, pull end a square); the count at every
+level: `counts_by_level.md`.
 """
 
 
@@ -49,20 +53,22 @@ def _median(cases, key):
 
 
 def summary(runs: list[dict]) -> list[str]:
-    rows = ["| level | passed | count = planted | count <= planted + 1 | median active / planted length | "
-            "median realizable pose error | suite time |", "|---|---|---|---|---|---|---|"]
+    rows = ["| level | passed | count <= planted + 1 | as built within 1 % of L | route rule | "
+            "median worst capstan (planted) | kinks (planted) | median as-built error | suite time |",
+            "|---|---|---|---|---|---|---|---|---|"]
     for r in runs:
         done = [c for c in r["cases"] if "error" not in c]
         t = r["totals"]
-        rows.append(f"| {r['level']} | {t['passed']} of {t['cases']} | "
-                    f"{sum(c['count'] == c['planted_count'] for c in done)} | {t['count_within_planted_plus_one']} | "
-                    f"{_median(done, 'length_ratio'):.2f} | {100 * _median(done, 'realizable_pose_error_rel'):.2f} % | "
-                    f"{t['time_s']:.0f} s |")
+        rows.append(f"| {r['level']} | {t['passed']} of {t['cases']} | {t['count_within_planted_plus_one']} | "
+                    f"{t['within_one_percent']} | {t['route_rule']} | {_median(done, 'capstan_worst'):.2f} "
+                    f"({_median(done, 'planted_capstan_worst'):.2f}) | {t['kinks']} ({t['planted_kinks']}) | "
+                    f"{100 * _median(done, 'realizable_pose_error_rel'):.2f} % | {t['time_s']:.0f} s |")
     return rows
 
 
 def per_case(runs: list[dict]) -> list[str]:
-    """Per case and level: tendons found / planted (best extractor), realizable pose error, kinks, capstan, pass."""
+    """Per case and level: tendons designed / planted (where from), as-built pose
+    error, worst capstan against the planted tendons', kinks, pass."""
     levels = [r["level"] for r in runs]
     by = [{c["case"]: c for c in r["cases"]} for r in runs]
     rows = ["| case | " + " | ".join(f"level {lv}" for lv in levels) + " |", "|---|" + "---|" * len(levels)]
@@ -73,8 +79,10 @@ def per_case(runs: list[dict]) -> list[str]:
             if c is None or "error" in c:
                 cells.append("-" if c is None else "failed")
                 continue
+            rule = route_rule(c)
             cells.append(f"{c['count']}/{c['planted_count']} {c['best']}, {100 * c['realizable_pose_error_rel']:.2f} %, "
-                         f"{c['kinks']} kinks, capstan {c['capstan_worst']:.2f}{'' if c['passed'] else ' **miss**'}")
+                         f"capstan {c['capstan_worst']:.2f}/{c['planted_capstan_worst']:.2f}, {c['kinks']} kinks"
+                         f"{'' if c['passed'] else ' **miss**'}{'' if rule else ' **route rule**'}")
         rows.append(f"| {name} | " + " | ".join(cells) + " |")
     return rows
 
@@ -87,7 +95,8 @@ def page(runs: list[dict]) -> str:
         f"Made at commit `{p['commit']}`{' (with uncommitted changes)' if p['dirty'] else ''} on {p['date']}, "
         f"settings: {settings}, consolidation: {runs[0]['consolidation']}.", "",
         *summary(runs), "", "## Per case", "",
-        "Tendons found / planted (best extractor), realizable pose error (% of L), kinks, worst capstan factor.", "",
+        "Tendons designed / planted (the extractor they came from), as-built pose error (% of L), worst capstan "
+        "factor / the planted tendons', kinks.", "",
         *per_case(runs), "", "## The count across levels", "", *counts_by_level.table(runs), ""])
 
 
@@ -115,8 +124,7 @@ def main(argv=None) -> int:
         runs.append(run_suite(SUITE, level, run_dir, overrides, cases=args.cases, workers=args.workers))
         args.out.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(run_dir / "planted_bench.csv", args.out / f"planted_bench_level{level}.csv")
-        if level == 2:
-            shutil.copyfile(run_dir / "gallery.png", args.out / "gallery_level2.png")
+        shutil.copyfile(run_dir / "gallery.png", args.out / f"gallery_level{level}.png")
     (args.out / "counts_by_level.md").write_text("\n".join(counts_by_level.table(runs)) + "\n")
     (args.out / "README.md").write_text(page(runs))
     print(f"wrote {args.out}/", file=sys.stderr)

@@ -122,32 +122,51 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
         check_writable(out / name, "output")
     progress.message(f"design: optimizing {scene.name} at level {level}")
     run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
-    t_opt = time.perf_counter() - t0
-    cons = consolidation or ConsolidationSettings(budget=budget)
-    kwargs = {} if plugin_timeout is None else {"plugin_timeout": plugin_timeout}
-
-    def log(text: str) -> None:
-        progress.message(f"design: {text}")
-
-    ex = extract(run.recording, extractors, solver="recorded", record=False, consolidation=cons, log=log, **kwargs)
-    problem = ex.problem
-    ms = MetricSettings(mu=problem.scene.tendons.friction)
-    entries = front_entries(ex, ms.mu, ms.kink_angle)
-    if not entries:
-        raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
-    _, layout = recommend(entries, budget, max_tendons)
-    if not layout.optimized:  # a layout consolidation passed through: its routes are optimized now
-        log(f"optimizing the recommended {layout.count} route(s)")
-        layout = finish(problem, layout, ex.state, ex.run.settings, cons, ex.run.meta.get("solver", "auto"), log)
-    summary = _summary(ex, layout, entries, budget, max_tendons, ms, t0, t_opt)
+    ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
+                                      plugin_timeout)
+    summary["timing"]["optimize_s"] = run.summary["time_s"]
     summary["files"] = _write(out, ex, layout, summary, png)
     summary["time_s"] = time.perf_counter() - t0
     write_json(summary, out / "design.json")
     return Design(summary, run, ex, layout)
 
 
+def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int | None = None,
+                extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
+                progress: Progress | None = None,
+                plugin_timeout: float | None = None) -> tuple[Extraction, Layout, dict]:
+    """Every extractor on a recorded run's last stage, consolidated and routed, and
+    the layout recommended (:func:`recommend`), its routes optimized: the
+    extraction, the layout and the summary ``design.json`` holds (no file is
+    written)."""
+    t0 = time.perf_counter()
+    progress = progress or Progress(enabled=False)
+    cons = consolidation or ConsolidationSettings(budget=budget)
+    kwargs = {} if plugin_timeout is None else {"plugin_timeout": plugin_timeout}
+
+    def log(text: str) -> None:
+        progress.message(f"design: {text}")
+
+    ex = extract(recording, extractors, solver="recorded", record=False, consolidation=cons, log=log, **kwargs)
+    problem = ex.problem
+    ms = MetricSettings(mu=problem.scene.tendons.friction)
+    entries = front_entries(ex, ms.mu, ms.kink_angle)
+    if not entries:
+        raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
+    _, layout = recommend(entries, budget, max_tendons)
+    finish_s = 0.0
+    if not layout.optimized:  # a layout consolidation passed through: its routes are optimized now
+        log(f"optimizing the recommended {layout.count} route(s)")
+        t1 = time.perf_counter()
+        layout = finish(problem, layout, ex.state, ex.run.settings, cons, ex.run.meta.get("solver", "auto"), log)
+        finish_s = time.perf_counter() - t1
+    summary = _summary(ex, layout, entries, budget, max_tendons, ms, time.perf_counter() - t0)
+    summary["timing"]["route_s"] += finish_s
+    return ex, layout, summary
+
+
 def _summary(ex: Extraction, layout: Layout, entries, budget: float, max_tendons, ms: MetricSettings,
-             t0: float, t_opt: float) -> dict:
+             extract_s: float) -> dict:
     problem, run = ex.problem, ex.run
     tendons = layout.tendons()
     real = layout.realizable
@@ -159,7 +178,7 @@ def _summary(ex: Extraction, layout: Layout, entries, budget: float, max_tendons
     if real.poses is not None:
         metrics["realizable_pose_errors_rel"] = [r.pose_error_rel for r in real.poses]
     ts = problem.scene.tendons
-    route_evals = sum(r.consolidation.route_evaluations for r in ex.results if r.consolidation is not None)
+    done = [r.consolidation for r in ex.results if r.consolidation is not None]
     return {"scene": problem.scene.name, "resolution": problem.level, "body_size": problem.size,
             "friction": ts.friction, "clearance": ts.clearance, "budget": budget, "max_tendons": max_tendons,
             "recommended": {"count": layout.count, "source": layout.source, "tendons": tendon_rows(layout, ms.mu),
@@ -169,8 +188,8 @@ def _summary(ex: Extraction, layout: Layout, entries, budget: float, max_tendons
                             "realizable_pose_error_rel": r.metrics.get("realizable_pose_error_rel"),
                             "capstan_worst": r.metrics.get("capstan_worst"), "time_s": r.time_s,
                             **({"error": r.error} if r.error else {})} for r in ex.results],
-            "timing": {"optimize_s": t_opt, "extract_s": time.perf_counter() - t0 - t_opt,
-                       "route_evaluations": route_evals},
+            "timing": {"optimize_s": None, "extract_s": extract_s, "route_s": sum(c.route_s for c in done),
+                       "route_evaluations": sum(c.route_evaluations for c in done)},
             "provenance": provenance()}
 
 

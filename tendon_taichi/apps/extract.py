@@ -107,13 +107,15 @@ def idealized_state(run: RecordedRun, problem: Problem, stage: int, solver: str)
 def run_extractor(name: str, problem: Problem, state: IdealizedState, options: dict | None,
                   run: RecordedRun, solver: str, metric_settings: MetricSettings,
                   consolidation: ConsolidationSettings | None = None,
-                  timeout: float = PLUGIN_TIMEOUT, log=None) -> ExtractorResult:
+                  timeout: float = PLUGIN_TIMEOUT, log=None, done: dict | None = None) -> ExtractorResult:
     """Run one extractor on read-only copies of ``problem`` and ``state`` (for at
     most ``timeout`` s), check its tendons (:mod:`~tendon_taichi.extract.checks`),
     turn them into routes, consolidate and optimize them on the as-built robot
     (:mod:`~tendon_taichi.extract.consolidation`) and score them; a failing plugin
     gives a result with ``error`` instead of raising. ``log(text)`` hears of
-    consolidation's steps."""
+    consolidation's steps. ``done`` maps the tendons of extractors run before
+    (their waypoints) to their consolidation: the same tendons are not
+    consolidated twice."""
     t0 = time.perf_counter()
     try:
         ext = load_extractor(name)
@@ -127,12 +129,19 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
         msg = str(exc).splitlines()[0] if str(exc) else ""
         return ExtractorResult(name, time_s=time.perf_counter() - t0,
                                error=f"extractor '{name}' raised {type(exc).__name__}: {msg}")
+    key = tuple(t.waypoints.tobytes() for t in tendons)
     try:
-        cons = consolidate(problem, tendons, state, run.settings, consolidation or ConsolidationSettings(), solver,
-                           source=name, log=log)
+        if done is not None and key in done:
+            cons = done[key].relabel(name)
+            (log or (lambda text: None))(f"{name}: the same tendons as {done[key].layout.source}")
+        else:
+            cons = consolidate(problem, tendons, state, run.settings, consolidation or ConsolidationSettings(),
+                               solver, source=name, log=log)
     except ConvergenceError as exc:
         return ExtractorResult(name, time_s=time.perf_counter() - t0,
                                error=f"extractor '{name}': its tendons' robot cannot be solved ({exc})")
+    if done is not None:
+        done.setdefault(key, cons)
     real = cons.realizable
     tendons = cons.tendons
     metrics = tendon_metrics(problem, state, tendons, metric_settings)
@@ -190,8 +199,9 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     problem = run.problem().with_tendons(friction=friction, clearance=clearance)
     state = idealized_state(run, problem, stage, solver)
     ms = metric_settings or MetricSettings(mu=problem.scene.tendons.friction)
-    results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout, log)
-               for n in names]
+    done: dict = {}
+    results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout, log,
+                             done) for n in names]
     out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
     if record and any(r.error is None for r in results):
         try:

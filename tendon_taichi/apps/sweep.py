@@ -20,15 +20,17 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import math
 import itertools
 import time
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from ..body.scene import Scene, load_scene, with_overrides
 from ..errors import InputError, Stopped
 from ..extract.plugins import available_extractors
+from ..extract.settings import BUDGET, ConsolidationSettings
 from ..files import atomic_path, write_json
 from ..io.plots import plot_sweep
 from ..io.progress import Progress
@@ -38,7 +40,7 @@ from ..version import provenance
 from .case import STOP, worker_setup
 from .case import run_case as run_one
 
-SWEEP_KEYS = ("name", "scenes", "levels", "extractors", "solver", "grid", "set")
+SWEEP_KEYS = ("name", "scenes", "levels", "extractors", "solver", "grid", "set", "consolidation")
 #: grid and set keys that are [tendons] settings (the others are [optimize] ones)
 TENDON_KEYS = ("friction", "clearance")
 
@@ -86,6 +88,7 @@ class Sweep:
     grid: dict
     fixed: dict
     cases: tuple[SweepCase, ...]
+    consolidation: dict = field(default_factory=dict)  # the [consolidation] table: ConsolidationSettings fields
 
 
 def _fail(origin: str, msg: str):
@@ -144,6 +147,7 @@ def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None,
             _fail(origin, f"grid.{key} must be a non-empty list of values")
     for key in set(grid) & set(fixed):
         _fail(origin, f"'{key}' is both in [grid] and in [set]")
+    consolidation = _consolidation(doc.get("consolidation", {}), origin)
     loaded = [_scene(s, base, origin) for s in scenes]
     given = {k: v for k, v in (tendons or {}).items() if v is not None}
     cases = []
@@ -156,10 +160,27 @@ def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None,
             sc = sc.with_tendons(where, **{k: v for k, v in settings.items() if k in TENDON_KEYS})
             sc = sc.with_tendons(**given)
             cid = case_id({"kind": "sweep-design", **_scene_digest(scene), "level": level, "settings": settings,
-                           "tendons": given, "extractors": list(extractors), "solver": solver})
+                           "tendons": given, "extractors": list(extractors), "solver": solver,
+                           "consolidation": consolidation})
             cases.append(SweepCase(cid, sc, level, settings, point))
     return Sweep(name, None, tuple(loaded), tuple(levels), tuple(extractors), solver, dict(grid), dict(fixed),
-                 tuple(cases))
+                 tuple(cases), consolidation)
+
+
+def _consolidation(table, origin: str) -> dict:
+    """The [consolidation] table: fields of ConsolidationSettings, checked."""
+    if not isinstance(table, dict):
+        _fail(origin, "[consolidation] must be a table")
+    known = {f.name: f for f in fields(ConsolidationSettings)}
+    for key, value in table.items():
+        if key not in known:
+            _fail(origin, f"unknown consolidation setting '{key}' (known: {', '.join(known)})")
+        whole = known[key].type in (int, "int")
+        ok = isinstance(value, int) if whole else isinstance(value, (int, float)) and math.isfinite(value)
+        if isinstance(value, bool) or not ok or (value < 0 and key != "tolerance"):
+            _fail(origin, f"consolidation.{key} must be {'an integer' if whole else 'a number'} >= 0 "
+                          f"(got {value!r})")
+    return dict(table)
 
 
 def load_sweep(path: str | Path, tendons: dict | None = None) -> Sweep:
@@ -184,14 +205,18 @@ DESIGN_KEYS = ("realizable_pose_error_rel", "realizable_pose_error_rel_frictionl
                "clearance_min", "total_length")
 
 
-def run_case(scene: Scene, level: int, solver: str, extractors: tuple[str, ...], case_dir: str) -> dict:
-    """Design ``scene`` at ``level`` with ``extractors`` into ``case_dir`` (``run.rrd``,
-    ``run.npz``, ``design.json``, ``design.svg``, ``optimize.json``, ``compare.json``).
-    Returns the case's figures: ``optimize`` (the final stage), ``extract`` (per
-    extractor its metrics, or its error), ``design`` (the recommended design's
-    count, source and figures), ``stages``."""
+def run_case(scene: Scene, level: int, solver: str, extractors: tuple[str, ...], case_dir: str,
+             consolidation: dict | None = None) -> dict:
+    """Design ``scene`` at ``level`` with ``extractors`` (and the fields of
+    :class:`~tendon_taichi.extract.settings.ConsolidationSettings` given in
+    ``consolidation``) into ``case_dir`` (``run.rrd``, ``run.npz``, ``design.json``,
+    ``design.svg``, ``optimize.json``, ``compare.json``). Returns the case's
+    figures: ``optimize`` (the final stage), ``extract`` (per extractor its
+    metrics, or its error), ``design`` (the recommended design's count, source
+    and figures), ``stages``."""
     d = Path(case_dir)
-    case = run_one(scene, level, d, solver, list(extractors))
+    cons = ConsolidationSettings(**(consolidation or {}))
+    case = run_one(scene, level, d, solver, list(extractors), cons, budget=cons.budget or BUDGET)
     run, comp = case.run, case.extraction.as_json()
     write_json(run.summary, d / "optimize.json")
     write_json(comp, d / "compare.json")
@@ -222,7 +247,8 @@ def run(sweep: Sweep | str | Path, out_dir: str | Path, workers: int | None = No
     sw = sweep if isinstance(sweep, Sweep) else load_sweep(sweep)
     out = Path(out_dir)
     t0 = time.perf_counter()
-    tasks = [Task(c.id, c.label, run_case, (c.scene, c.level, sw.solver, sw.extractors, str(out / "cases" / c.id)))
+    tasks = [Task(c.id, c.label, run_case, (c.scene, c.level, sw.solver, sw.extractors, str(out / "cases" / c.id),
+                                             sw.consolidation))
              for c in sw.cases]
     report = run_tasks(tasks, out / "cases", workers, scheduler, progress or Progress(), describe=_describe,
                        setup=worker_setup(), stop=STOP)
@@ -230,7 +256,7 @@ def run(sweep: Sweep | str | Path, out_dir: str | Path, workers: int | None = No
     rows = [case_row(by_id[o.task.id], o) for o in report.outcomes]
     result = {"name": sw.name, "sweep": str(sw.path) if sw.path else None,
               "scenes": [s.name for s in sw.scenes], "levels": list(sw.levels), "extractors": list(sw.extractors),
-              "solver": sw.solver, "grid": sw.grid, "set": sw.fixed, "cases": rows,
+              "solver": sw.solver, "grid": sw.grid, "set": sw.fixed, "consolidation": sw.consolidation, "cases": rows,
               "failed": sum("error" in r for r in rows), "reused": sum(r["reused"] for r in rows),
               "interrupted": report.interrupted, "engine": report.engine, "provenance": provenance(),
               "time_s": time.perf_counter() - t0}

@@ -105,13 +105,28 @@ class Mesh:
         p = self.nodes[self.triangles]
         return float(np.linalg.norm(p - p.mean(axis=1, keepdims=True), axis=2).max())
 
-    def locate(self, points: np.ndarray, max_dist: float = np.inf,
-               k: int = 12) -> tuple[Embedding, np.ndarray]:
+    def locate(self, points: np.ndarray, max_dist: float = np.inf, k: int = 12,
+               hint: np.ndarray | None = None) -> tuple[Embedding, np.ndarray]:
         """Embed ``points`` (q, 2): the triangle nearest to each point and its
         barycentric weights (projected onto the triangle for points just outside),
         plus the distance (q,) from each point to the mesh (0 inside). Distances
-        are exact up to ``max_dist``; beyond it a point only reports that it is farther."""
+        are exact up to ``max_dist``; beyond it a point only reports that it is farther.
+        ``hint`` (q,): a triangle per point to try first (where the point was a
+        moment ago); a point inside it stays in it."""
         points = np.asarray(points, dtype=float).reshape(-1, 2)
+        if hint is not None and len(hint) == len(points) and len(points):
+            bary = self.barycentric(points, hint)
+            inside = bary.min(axis=1) >= 0.0
+            if inside.all():
+                return Embedding(np.asarray(hint, dtype=np.int64).copy(), bary / bary.sum(axis=1, keepdims=True)), \
+                    np.zeros(len(points))
+            rest, dist = self.locate(points[~inside], max_dist, k)
+            tri = np.asarray(hint, dtype=np.int64).copy()
+            tri[~inside] = rest.tri
+            bary[~inside] = rest.bary
+            d = np.zeros(len(points))
+            d[~inside] = dist
+            return Embedding(tri, bary / bary.sum(axis=1, keepdims=True)), d
         q = len(points)
         k = min(k, self.n_triangles)
         _, cand = self._centroid_tree.query(points, k=k)

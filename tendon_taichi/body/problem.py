@@ -98,13 +98,14 @@ class Problem:
         scene = self.scene.with_tendons(**changes)
         return self if scene is self.scene else replace(self, scene=scene)
 
-    def embed_waypoints(self, nodes: np.ndarray, waypoints: np.ndarray) -> Embedding:
+    def embed_waypoints(self, nodes: np.ndarray, waypoints: np.ndarray, hint: np.ndarray | None = None) -> Embedding:
         """A tendon's waypoints (k, 2) embedded in the rest mesh: exactly as its fiber
-        nodes are when it runs through them (``nodes`` (k,)), else located."""
+        nodes are when it runs through them (``nodes`` (k,)), else located (trying
+        the triangles ``hint`` (k,) first)."""
         if len(nodes) == len(waypoints):
             emb = self.fibers.embedding
             return Embedding(emb.tri[nodes], emb.bary[nodes])
-        return self.mesh.locate(waypoints)[0]
+        return self.mesh.locate(waypoints, hint=hint)[0]
 
     def target_positions(self, x: np.ndarray) -> np.ndarray:
         """Where the target points are (t, 2) for node positions ``x`` (n, 2)."""

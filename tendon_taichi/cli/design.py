@@ -29,11 +29,16 @@ def table(summary: dict) -> list[str]:
     m = rec["metrics"]
     out = [f"{summary['scene']} level {summary['resolution']} (L = {100 * summary['body_size']:.2f} cm, friction "
            f"{summary['friction']:g}, clearance {summary['clearance']:g} L, budget {100 * summary['budget']:g}% of L)",
+           "the front (per tendon count, the lowest as-built error found; * the recommended design):",
            f"{'tendons':>7} {'as built':>9} {'capstan':>7} {'kinks':>5} {'length':>8}  from"]
+    chosen = {"count": rec["count"], "realizable_pose_error_rel": m["realizable_pose_error_rel"],
+              "capstan_worst": m["capstan_worst"], "kinks": m["kinks"], "total_length": m["total_length"],
+              "source": rec["source"]}
     for e in summary["front"]:
-        mark = " *" if e["count"] == rec["count"] else "  "
-        out.append(f"{e['count']:>5}{mark} {100 * e['realizable_pose_error_rel']:>8.2f}% {e['capstan_worst']:>7.3f} "
-                   f"{e['kinks']:>5} {100 * e['total_length']:>5.1f} cm  {e['source']}")
+        for row, mark in ((e, "  "), (chosen, " *")) if e["count"] == rec["count"] else ((e, "  "),):
+            out.append(f"{row['count']:>5}{mark} {100 * row['realizable_pose_error_rel']:>8.2f}% "
+                       f"{row['capstan_worst']:>7.3f} {row['kinks']:>5} {100 * row['total_length']:>5.1f} cm  "
+                       f"{row['source']}")
     out.append(f"recommended: {rec['count']} tendon(s) (from {rec['source']}), as built "
                f"{100 * m['realizable_pose_error_rel']:.2f}% of L (frictionless "
                f"{100 * m['realizable_pose_error_rel_frictionless']:.2f}%), worst capstan {m['capstan_worst']:.3f}, "
@@ -42,10 +47,7 @@ def table(summary: dict) -> list[str]:
         pulls = ", ".join(f"{1e3 * c:.2f}" for c in t["contraction"])
         out.append(f"  tendon {i + 1}: {100 * t['length']:.1f} cm, pull {pulls} mm, tension {t['tension']:.3f} N, "
                    f"turning {np.degrees(t['turning']):.0f} deg, capstan {t['capstan']:.3f}")
-    files = summary["files"]
-    out.append(f"files: {files['json']}, {files['svg']}" + (f", {files['png']}, {files['front_png']}"
-                                                              if "png" in files else "")
-               + f", {files['recording']}")
+    out.append("files: " + ", ".join(summary["files"].values()))
     return out
 
 

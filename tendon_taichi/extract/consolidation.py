@@ -13,31 +13,38 @@ those routes, capstan friction included (:mod:`.realizable`). Each round tries
   along both and across the gap (never a path through the lattice),
 
 and ranks them by what route optimization minimizes (:mod:`.routing`): the
-as-built pose error squared plus the friction price of the pull the routes
-lose to their bends - so a join that loses more pull than it buys in pose
-ranks below the drop that avoids it. The least-cost one within the bound
-below is kept. A round first **screens** its candidates
-by one Gauss-Newton step each from the current layout's solution
-(:func:`~tendon_taichi.extract.realizable.predict_realizable`), then solves
-the ``screen`` best in full (``screen`` 0: every one, unscreened). The bound
-on the as-built error is the larger of
+as-built pose error squared plus the routes' shape cost - the friction price
+of the pull they lose to their bends, and the penalties on bends sharper than
+a channel takes and on routes that turn back on themselves. Its square root is the layout's *effective error*
+(fraction of L): its pose error with the lost pull priced in. A round first
+**screens** its candidates by one Gauss-Newton step each from the current
+layout's solution (:func:`~tendon_taichi.extract.realizable.predict_realizable`),
+then solves the ``screen`` best in full (``screen`` 0: every one, unscreened),
+and keeps the least costly whose effective error is within the bound, the
+larger of
 
-* the extracted layout's error plus ``tolerance`` x L (cumulative over all
-  rounds): a tendon that buys less pose accuracy than that is not worth its
-  motor, and
-* ``budget`` x L, the pose error the designer accepts anyway;
+* the extracted layout's as-built error plus ``tolerance`` x L (cumulative
+  over all rounds; the fitted routes' error, or, when their effective error is
+  over the budget, that of the routes optimized once): a tendon that buys
+  less pose accuracy than that is not worth its motor, and
+* ``budget`` x L, the pose error the designer accepts anyway.
 
-when no candidate is within it, the PROBES least costly (within REACH times
-the bound) have their routes optimized, and the first that comes within is
-kept. At the end the routes left are **oriented** (each pulled at the
-end that serves the pose at least cost) and **optimized**: control points,
-anchors, pull ends and contractions together, at most ``refine`` rounds.
+So a reduction is not taken when the pull its routes lose to friction costs
+more than the budget allows - a join that loses more pull than it buys in
+pose, or a drop that leaves one route bent too far to do the work of two.
+When no candidate is within the bound, the PROBES least costly (within REACH
+times it) have their routes optimized, and the first that comes within is
+kept.
+At the end the routes left are **oriented** (each pulled at the end that
+serves the pose at least cost) and **optimized**: control points, anchors,
+pull ends and contractions together, at most ``refine`` rounds.
 Both bounds and the reach are fractions of the body size, and routes do not
 depend on the mesh, so they mean the same at every resolution.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, replace
 from typing import Callable, NamedTuple
 
@@ -49,7 +56,7 @@ from ..objective.settings import OptimizeSettings
 from .protocol import IdealizedState, Tendon, turn_angles
 from .realizable import RealizableResult, pose_tension, predict_realizable, solve_realizable_poses, warm_ratios
 from .routes import Route, fit_route, join_routes, keep_clear, sample_count
-from .routing import PRICE_PER_BUDGET, RouteSettings, optimize_routes
+from .routing import PRICE_PER_BUDGET, RouteSettings, optimize_routes, shape_cost
 from .settings import ConsolidationSettings
 
 
@@ -93,6 +100,12 @@ class Layout:
     def error(self) -> float:
         return self.realizable.pose_error_rel
 
+    @property
+    def effective(self) -> float:
+        """The effective error (fraction of L): the square root of the cost."""
+        return float(np.sqrt(self.cost))
+
+
     def tendons(self) -> list[Tendon]:
         """The routes as tendons, each with its contraction (the first pose's)."""
         out = []
@@ -120,7 +133,7 @@ class Consolidation:
     through (``front``); ``evaluations`` candidate layouts were solved in full, of
     which ``unsolved`` could not be (an equilibrium did not converge) and were
     skipped; ``screened`` candidates were screened; ``route_evaluations``
-    equilibria were solved by route optimization."""
+    equilibria were solved by route optimization, in ``route_s`` seconds."""
 
     layout: Layout
     extracted_count: int
@@ -131,6 +144,7 @@ class Consolidation:
     unsolved: int = 0
     screened: int = 0
     route_evaluations: int = 0
+    route_s: float = 0.0
 
     @property
     def tendons(self) -> list[Tendon]:
@@ -140,12 +154,24 @@ class Consolidation:
     def realizable(self) -> RealizableResult:
         return self.layout.realizable
 
+    def relabel(self, source: str) -> "Consolidation":
+        """The same outcome credited to extractor ``source`` (which found the same
+        tendons), its route optimization not counted again."""
+        old = self.layout.source
+
+        def credit(lay: Layout) -> Layout:
+            routes = [replace(r, source=source) if r.source == old else r for r in lay.routes]
+            return replace(lay, routes=routes, source=source)
+
+        return replace(self, layout=credit(self.layout), front={k: credit(lay) for k, lay in self.front.items()},
+                       route_evaluations=0, route_s=0.0)
+
     def as_json(self) -> dict:
         return {"extracted_count": self.extracted_count,
                 "extracted_realizable_pose_error_rel": self.extracted_pose_error_rel,
                 "steps": [s.as_json() for s in self.steps], "evaluations": self.evaluations,
                 "unsolved": self.unsolved, "screened": self.screened,
-                "route_evaluations": self.route_evaluations}
+                "route_evaluations": self.route_evaluations, "route_s": self.route_s}
 
 
 class Candidate(NamedTuple):
@@ -171,11 +197,10 @@ class _Search:
 
     # ------------------------------------------------------------ solving and ranking
     def cost(self, routes: list[Route], error: float) -> float:
-        """The as-built pose error (fraction of L) squared plus the friction price of
-        the routes' bends."""
-        mu = self.rs.friction
-        lost = sum(1.0 - np.exp(-mu * turn_angles(r.waypoints).sum()) for r in routes)
-        return error ** 2 + self.rs.friction_price * lost
+        """The as-built pose error (fraction of L) squared plus the routes' shape
+        cost: the friction price of their bends and the penalties on sharp bends and
+        turning back (:func:`~tendon_taichi.extract.routing.shape_cost`)."""
+        return error ** 2 + shape_cost([r.waypoints for r in routes], self.rs)[0]
 
     def solve(self, routes: list[Route], start=None, near: Layout | None = None) -> Layout | None:
         """The as-built robot of ``routes`` (its contractions solved from ``start``
@@ -208,16 +233,17 @@ class _Search:
         return sorted([s for s in solved if s[1] is not None], key=lambda s: s[1].cost)
 
     def reduce(self, now: Layout, bound: float) -> tuple[Candidate, Layout] | None:
-        """The next reduction: the least-cost drop or join within ``bound``; when none
-        is, the first of the PROBES least-cost ones (within REACH x bound) that route
-        optimization brings within it; None when no reduction fits."""
+        """The next reduction: the least-cost drop or join whose effective error is
+        within ``bound``; when none is, the first of the PROBES least-cost ones
+        (within REACH x bound) that route optimization brings within it; None when
+        no reduction fits."""
         ranked = self.ranked(self.reductions(now), now)
-        within = [s for s in ranked if s[1].error <= bound]
+        within = [s for s in ranked if s[1].effective <= bound]
         if within:
             return within[0]
-        for cand, lay in [s for s in ranked if s[1].error <= REACH * bound][:PROBES]:
+        for cand, lay in [s for s in ranked if s[1].effective <= REACH * bound][:PROBES]:
             lay = self.optimize(lay, rounds=1)
-            if lay.error <= bound:
+            if lay.effective <= bound:
                 return cand, lay
         return None
 
@@ -304,9 +330,11 @@ class _Search:
             routes = [keep_clear(r, self.problem.walls, self.rs.clearance) or r for r in routes]
             real = now.realizable
             self.log(f"{self.source}: optimizing {len(routes)} route(s), round {k + 1}")
+            t0 = time.perf_counter()
             res = optimize_routes(self.problem, routes, np.atleast_2d(real.ratios).reshape(self.problem.n_poses, -1),
                                   self.settings, self.rs, self.solver, positions(real))
             self.out.route_evaluations += res.evaluations
+            self.out.route_s += time.perf_counter() - t0
             cleared = [keep_clear(r, self.problem.walls, self.rs.clearance) for r in res.routes]
             if any(r is None for r in cleared):
                 break
@@ -355,8 +383,14 @@ def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, 
     out.front[first.count] = first
     if not options.enabled:
         return out
-    bound = max(first.error + options.tolerance, options.budget)
-    now = first
+    if first.effective > options.budget:  # fitted routes that fall short: optimized first, for an honest start
+        now = search.optimize(first, rounds=1)
+        if now is not first:
+            out.steps.append(Step("route", tuple(range(now.count)), now.count, now.error))
+            out.front[now.count] = now
+    else:
+        now = first
+    bound = max(now.error + options.tolerance, options.budget)
     while now.routes:
         found = search.reduce(now, bound)
         if found is None:

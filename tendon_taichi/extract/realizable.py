@@ -1,8 +1,11 @@
-"""The realizable robot (``docs/method.md``): the body with only the extracted
-tendons, each a sliding cable through its waypoints (the fiber nodes it
-follows) with one rest length and one tension. Its tendon contractions are
-found by the same soft IK as the idealized robot (pose objective, bounds
-[-pmax, cmax] on c / L0, adjoint gradient) - a handful of variables.
+"""The realizable robot (``docs/method.md``): the body with only the given
+tendons, each a cable through its waypoints (a lattice tendon's fiber nodes, or
+a smooth route's waypoints located in the rest mesh) with one rest length,
+pulled at its last waypoint and sliding through the others with the scene's
+capstan friction - the *as-built* robot (frictionless where mu = 0). Its tendon
+contractions are found by the same soft IK as the idealized robot (pose
+objective, bounds [-pmax, cmax] on c / L0, adjoint gradient) - a handful of
+variables.
 
 :func:`predict_realizable` estimates a layout's realizable pose error far more
 cheaply, by one Gauss-Newton step from a nearby solved layout; consolidation
@@ -50,14 +53,16 @@ def deformed_waypoints(problem: Problem, tendons: list[Tendon], x: np.ndarray) -
     return [problem.embed_waypoints(t.nodes, t.waypoints).positions(problem.mesh.triangles, x) for t in tendons]
 
 
-def tendon_cables(problem: Problem, tendons: list[Tendon]) -> CableSet:
+def tendon_cables(problem: Problem, tendons: list[Tendon], hint: np.ndarray | None = None) -> CableSet:
     """Tendons as many-segment cables through their waypoints
-    (:meth:`~tendon_taichi.body.problem.Problem.embed_waypoints`), with the scene's
-    fiber stiffness as EA and its tendon friction."""
+    (:meth:`~tendon_taichi.body.problem.Problem.embed_waypoints`; ``hint``: a
+    triangle per waypoint, all tendons', to try first), with the scene's fiber
+    stiffness as EA and its tendon friction."""
     tri, bary = [], []
     segs, start, base = [], [0], 0
     for t in tendons:
-        e = problem.embed_waypoints(t.nodes, t.waypoints)
+        h = None if hint is None or len(hint) < base + len(t.waypoints) else hint[base:base + len(t.waypoints)]
+        e = problem.embed_waypoints(t.nodes, t.waypoints, h)
         tri.append(e.tri)
         bary.append(e.bary)
         k = len(t.waypoints)
@@ -193,8 +198,10 @@ def as_built_arrays(problem: Problem, tendons: list[Tendon], real: RealizableRes
     from ``tendon_start[t]`` to ``tendon_start[t+1]``, embedded by ``point_tri``
     (k,) and ``point_bary`` (k, 3); per pose ``x`` (P, n, 2) m, ``contraction``
     (P, T) m, ``tension`` (P, T) N at the pull end and ``segment_tension`` (P, S)
-    N (S = k - T segments, in waypoint order); the tendons' ``rest_length`` (T,) m
-    and ``stiffness`` (T,) EA, N."""
+    N (S = k - T segments, in waypoint order); the tendons' ``rest_length`` (T,) m,
+    ``stiffness`` (T,) EA, N, and ``eps`` (the width of the unilateral energy's
+    cubic zone, strain); the routes' spline ``control_points`` (all of them, tendon
+    t's from ``control_start[t]``; none for a lattice tendon)."""
     cables = tendon_cables(problem, tendons)
     model = Model.from_problem(problem, cables=cables)
     poses = [real] if real.poses is None else real.poses
@@ -211,4 +218,8 @@ def as_built_arrays(problem: Problem, tendons: list[Tendon], real: RealizableRes
             "point_tri": points.tri, "point_bary": points.bary, "x": np.array([r.x for r in poses]),
             "contraction": np.asarray(real.contraction, dtype=float).reshape(P, T),
             "tension": np.asarray(real.tau, dtype=float).reshape(P, T), "segment_tension": np.array(seg),
-            "rest_length": cables.a0, "stiffness": cables.stiffness}
+            "rest_length": cables.a0, "stiffness": cables.stiffness, "eps": problem.scene.fibers.eps,
+            "control_points": np.concatenate([t.control for t in tendons if t.control is not None] or
+                                             [np.zeros((0, 2))]),
+            "control_start": np.concatenate([[0], np.cumsum([0 if t.control is None else len(t.control)
+                                                             for t in tendons])]).astype(np.int64)}

@@ -5,13 +5,16 @@ moved together to minimize
     O = O_pose + O_reg                                   (the realizable soft IK, as built)
       + w_fric sum_t (1 - exp(-mu Theta_t))              (the pull the routes lose to their bends)
       + w_bend sum_j max(0, |theta_j| - theta_max)^2     (bends sharper than a channel takes)
+      + w_bend sum_t max(0, Theta_t - Theta_max)^2       (routes that turn back on themselves)
       + w_clear sum_i max(0, c - d_i)^2 / L^2            (waypoints closer than c to a wall)
 
 ``Theta_t`` is route t's rest turning (smoothed where it is straight),
 ``theta_j`` the turn at one of its waypoints, ``d_i`` a waypoint's distance
 from the walls and ``c`` the clearance. The friction price ``w_fric`` is
-PRICE_PER_BUDGET times the budget squared: losing a quarter of a tendon's
-pull weighs as much as a pose error of the whole budget. The gradient
+PRICE_PER_BUDGET times the budget squared: losing an eighth of a tendon's
+pull weighs as much as a pose error of the whole budget. The terms on the
+routes' shape alone (all but the pose, the regularizer and the clearance) are
+:func:`shape_cost`, which consolidation ranks layouts by too. The gradient
 w.r.t. the contractions is the soft IK's; w.r.t. a waypoint's rest position it
 is ``-lambda^T dR/dX`` from the same adjoint solve
 (:func:`~tendon_taichi.physics.waypoints.rest_point_gradient`), and the
@@ -37,7 +40,7 @@ from .realizable import tendon_cables
 from .routes import Route
 
 #: the weight of the friction cost, in units of the budget (a fraction of L) squared ...
-PRICE_PER_BUDGET = 4.0
+PRICE_PER_BUDGET = 8.0
 #: ... and with the default budget, 0.5 % of L
 FRICTION_PRICE = PRICE_PER_BUDGET * 0.005 ** 2
 #: the weight of the clearance penalty
@@ -46,6 +49,8 @@ CLEARANCE_WEIGHT = 1.0e2
 #: radius of about 4 % of L) and the weight of the penalty on sharper ones
 MAX_BEND = 0.35
 BEND_WEIGHT = 1.0e-2
+#: the most a route turns in all (rad, a quarter turn) before the same penalty
+MAX_TURNING = np.pi / 2
 #: smoothing of |theta| in the friction cost (rad): sqrt(theta^2 + d^2) - d
 TURN_SMOOTHING = 1.0e-3
 
@@ -92,6 +97,26 @@ def sharp_bends(points: np.ndarray, limit: float = MAX_BEND) -> tuple[float, np.
     return float((over * over).sum()), _to_points(2.0 * over * np.sign(theta), ga, gb, len(points))
 
 
+def shape_cost(points: list[np.ndarray], rs: "RouteSettings") -> tuple[float, list[np.ndarray]]:
+    """The terms of O on the routes' shape (module docstring: the friction price,
+    sharp bends, turning back) for each route's waypoints (k, 2), and their
+    gradients per route."""
+    mu, wf, wb = rs.friction, rs.friction_price, rs.bend_weight
+    total, grads = 0.0, []
+    for p in points:
+        sharp, g = sharp_bends(p)
+        theta, gt = turning(p)
+        over = max(theta - MAX_TURNING, 0.0)
+        total += wb * (sharp + over * over)
+        g = wb * (g + 2.0 * over * gt)
+        if mu > 0.0 and wf > 0.0:
+            keep = np.exp(-mu * theta)
+            total += wf * (1.0 - keep)
+            g = g + wf * mu * keep * gt
+        grads.append(g)
+    return total, grads
+
+
 @dataclass
 class RouteSettings:
     """``friction`` mu, ``clearance`` (m), ``friction_price`` and ``clearance_weight``
@@ -120,6 +145,7 @@ class RouteObjective:
         self.walls = problem.walls
         self.positions: list[np.ndarray] | None = None  # each pose's last equilibrium (warm starts)
         self.eval_tol: float | None = None
+        self.ik: SoftIK | None = None  # the robot of the last evaluation
         self.evaluations = 0
 
     # ------------------------------------------------------------ variables
@@ -145,22 +171,6 @@ class RouteObjective:
                          np.r_[np.tile(hi, n), np.full(r, fs.max_contraction)])
 
     # ------------------------------------------------------------ explicit terms
-    def bend_cost(self, points: list[np.ndarray]) -> tuple[float, list[np.ndarray]]:
-        """The friction and the sharp-bend terms of O, and their gradients per route."""
-        mu, wf, wb = self.rs.friction, self.rs.friction_price, self.rs.bend_weight
-        total, grads = 0.0, []
-        for p in points:
-            sharp, g = sharp_bends(p)
-            total += wb * sharp
-            g = wb * g
-            if mu > 0.0 and wf > 0.0:
-                theta, gt = turning(p)
-                keep = np.exp(-mu * theta)
-                total += wf * (1.0 - keep)
-                g = g + wf * mu * keep * gt
-            grads.append(g)
-        return total, grads
-
     def clearance_cost(self, points: np.ndarray) -> tuple[float, np.ndarray]:
         c, w = self.rs.clearance, self.rs.clearance_weight
         d, g = self.walls.distance_gradient(points)
@@ -169,14 +179,22 @@ class RouteObjective:
 
     # ------------------------------------------------------------ evaluation
     def soft_ik(self, routes: list[Route]) -> SoftIK:
-        """The as-built robot of these routes, warm started from the last positions."""
-        ik = SoftIK(self.problem, self.settings, self.solver, cables=tendon_cables(
-            self.problem, [r.tendon() for r in routes]))
+        """The as-built robot of these routes, warm started from the last positions:
+        the last one's models, their cables moved, while every waypoint stays in its
+        triangle (most steps), else a new one."""
+        last = self.ik
+        cables = tendon_cables(self.problem, [r.tendon() for r in routes],
+                               None if last is None else last.model.cables.points.tri)
+        if last is not None and np.array_equal(cables.points.tri, last.model.cables.points.tri):
+            last.move_cables(cables)
+            return last
+        ik = SoftIK(self.problem, self.settings, self.solver, cables=cables)
         if self.eval_tol is not None:
             ik.eval_tol = self.eval_tol
         if self.positions is not None:
             for ps, x in zip(ik.poses, self.positions):
                 ps.model.set_positions(x)
+        self.ik = ik
         return ik
 
     def evaluate(self, z: np.ndarray) -> tuple[float, np.ndarray]:
@@ -189,7 +207,7 @@ class RouteObjective:
         for ps, lam in zip(ik.poses, ik.adjoints):
             gX -= rest_point_gradient(ps.model, lam)
         points = [r.waypoints for r in routes]
-        ff, gf = self.bend_cost(points)
+        ff, gf = shape_cost(points, self.rs)
         fc, gc = self.clearance_cost(np.concatenate(points))
         gX += np.concatenate(gf) + gc
         g_c, at = [], 0

@@ -289,8 +289,10 @@ def story_figure(problem: Problem, planted: dict | None, stage0, final, extracto
     """The method in five panels, for a README: the planted tendons on their
     equilibrium (``planted``: a layout dict of :mod:`~tendon_taichi.planted`, or
     None), stage 0 (unregularized soft IK) and the final stage (``(x, tau,
-    figures)`` each) as fiber tensions, one extractor's tendons at rest, and its
-    realizable robot (``extractor``: a :class:`~tendon_taichi.tendons.ExtractorResult`)."""
+    figures)`` each) as fiber tensions, the designed routes at rest, and their
+    as-built robot (``extractor``: anything with a ``name``, ``metrics``,
+    ``tendons`` and ``realizable``, e.g. an
+    :class:`~tendon_taichi.apps.extract.ExtractorResult`)."""
     fig = new_figure(figsize=(19, 4.0))
     axes = fig.subplots(1, 5)
     T, X = problem.mesh.triangles, problem.mesh.nodes
@@ -328,7 +330,7 @@ def story_figure(problem: Problem, planted: dict | None, stage0, final, extracto
                        f"pose {100 * f.pose_error_rel:.2f}% of L")
     ax = axes[3]
     m = extractor.metrics
-    frame(ax, None, f"4. extracted ({extractor.name}): {m['count']} tendons, "
+    frame(ax, None, f"4. routes ({extractor.name}): {m['count']} tendons, "
                     f"{100 * m['total_length']:.1f} cm\n{m['kinks']} kinks, capstan worst {m['capstan_worst']:.2f}")
     for i, t in enumerate(extractor.tendons):
         ax.plot(t.waypoints[:, 0], t.waypoints[:, 1], color=colors[i % len(colors)], lw=2.2)
@@ -336,7 +338,7 @@ def story_figure(problem: Problem, planted: dict | None, stage0, final, extracto
         ax.plot(*t.waypoints[-1], "s", color=colors[i % len(colors)], ms=4)
     ax = axes[4]
     x = extractor.realizable.x
-    frame(ax, x, f"5. realizable robot (only those tendons)\npose {100 * m['realizable_pose_error_rel']:.2f}% of L")
+    frame(ax, x, f"5. as built (only those tendons, with friction)\npose {100 * m['realizable_pose_error_rel']:.2f}% of L")
     for i, t in enumerate(extractor.tendons):
         w = problem.embed_waypoints(t.nodes, t.waypoints).positions(T, x)
         ax.plot(w[:, 0], w[:, 1], color=colors[i % len(colors)], lw=2.2)

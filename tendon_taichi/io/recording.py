@@ -4,7 +4,8 @@ Layout (entity paths), timelines ``stage`` and ``iteration`` (the L-BFGS-B
 iteration counted over the whole run):
 
 * static: ``/meta/run`` (JSON: package version, scene name, resolution,
-  effective settings, solver), ``/meta/scene`` (the scene TOML), ``/problem/*``
+  effective [optimize] settings, the [tendons] ones, solver), ``/meta/scene``
+  (the scene TOML), ``/problem/*``
   (the rest mesh, clamps, fiber graph, embeddings and targets as f64 tensors,
   so a run can be rebuilt from the file alone), ``/world/rest_mesh`` and
   ``/world/rest_fibers`` (the fiber graph);
@@ -95,7 +96,9 @@ class Recorder:
         self.rec = rr.RecordingStream(APP_ID, recording_id=meta.get("run_id"))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec.save(str(self.path), default_blueprint=default_blueprint())
-        self.meta = {"format": FORMAT, **meta, "settings": settings_dict(settings)}
+        ts = problem.scene.tendons
+        self.meta = {"format": FORMAT, **meta, "settings": settings_dict(settings),
+                     "tendons": {"friction": ts.friction, "clearance": ts.clearance}}
 
     def write_header(self) -> None:
         """The static part: run metadata, scene, problem arrays, rest geometry."""
@@ -211,10 +214,12 @@ class RecordedRun:
         return settings_from_dict(self.meta["settings"])
 
     def problem(self) -> Problem:
-        """Rebuild the problem exactly as it was run (no scene file or meshing needed)."""
+        """Rebuild the problem exactly as it was run (no scene file or meshing needed),
+        with the run's effective [optimize] and [tendons] settings."""
         a = self.arrays
         scene = parse_scene(self.scene_toml, origin=f"{self.path} (recorded scene)", check_files=False)
         scene = scene.with_optimize(**{k: v for k, v in self.settings.__dict__.items()})
+        scene = scene.with_tendons(f"{self.path} (recorded settings)", **self.meta.get("tendons", {}))
         mesh = Mesh(a["nodes"], a["triangles"].astype(np.int64))
         fibers = FiberGraph(a["fiber_nodes"], Embedding(a["fiber_nodes_tri"].astype(np.int64),
                                                         a["fiber_nodes_bary"]),

@@ -184,12 +184,11 @@ class SoftIK:
         self.model = self.poses[0].model
         self.linear = self.poses[0].linear
         a0 = problem.fibers.a0 if cables is None else cables.a0
-        terms = [term.from_settings(problem, settings, a0) for term in registered()
-                 if cables is None or not term.lattice]
+        self.lattice = cables is None
         #: rest lengths (m) per entry of r: a0 once per pose, (P C,)
         self.a0 = np.tile(a0, problem.n_poses)
         self.n_cables = len(a0)
-        self.objective = Objective(terms)
+        self.objective = self._objective(a0)
         self.k: float | None = None
         self.configure(None)
         self.evaluations = 0
@@ -223,6 +222,24 @@ class SoftIK:
         self._last = None
         ac = self.split(np.asarray(r, dtype=float) * self.a0)
         return [ps.restart(ac[i]) for i, ps in enumerate(self.poses)]
+
+    def _objective(self, a0: np.ndarray) -> Objective:
+        """The objective's terms for cables of rest lengths ``a0`` (the fiber lattice:
+        every term; tendons: those that are not the lattice's)."""
+        return Objective([term.from_settings(self.problem, self.settings, a0) for term in registered()
+                          if self.lattice or not term.lattice])
+
+    def move_cables(self, cables) -> None:
+        """The realizable robot's cables (tendons) replaced by ``cables`` whose points
+        lie in the same triangles (:meth:`~tendon_taichi.physics.model.Model.move_cables`),
+        without rebuilding the models: positions stay as they are (warm starts)."""
+        for ps in self.poses:
+            ps.model.move_cables(cables)
+            ps.linear.cables_moved()
+            ps.lambda_warm, ps.pred = False, None
+        self.a0 = np.tile(cables.a0, self.problem.n_poses)
+        self.objective = self._objective(cables.a0)
+        self.configure(self.k)
 
     def warm_start(self, positions: list[np.ndarray]) -> None:
         """Start from each pose's ``positions`` (n, 2) instead of rest, with cold adjoints."""

@@ -94,12 +94,10 @@ class Model:
         pt_nodes = T[cab.points.tri] if self.P else np.zeros((0, 3), np.int64)
         nodes = np.concatenate([pt_nodes[cab.segments[:, e]].ravel() for e in (0, 1)])
         segs = np.tile(np.repeat(np.arange(self.S), 3), 2)
-        coefs = np.concatenate([s * cab.points.bary[cab.segments[:, e]].ravel()
-                                for e, s in ((0, -1.0), (1, 1.0))]) if self.S else np.zeros(0)
-        start, order = csr(nodes, self.n)
+        start, self._ns_order = csr(nodes, self.n)
         host.put_int("NS_START", start)
-        host.put_int("NS", segs[order])
-        host.put_f64("NS_COEF", coefs[order])
+        host.put_int("NS", segs[self._ns_order])
+        host.put_f64("NS_COEF", self._segment_coefficients(cab))
         so = self.offset["SCALARS"]
         host.fb[so + Scalar.MU], host.fb[so + Scalar.LAM], host.fb[so + Scalar.EPS] = mat.mu, mat.lam, self.eps
         host.fb[so + Scalar.FLOOR] = 1e-10 * mat.mu * mat.thickness
@@ -112,6 +110,29 @@ class Model:
         #: the last gradient dE/dx as the host sees it, (2n,) N
         self.last_gradient = np.zeros(2 * self.n)
         self.ib.from_numpy(host.ib.astype(np.int32))
+
+    def _segment_coefficients(self, cab: CableSet) -> np.ndarray:
+        """The signed barycentric weight of every node-segment entry, in CSR order."""
+        if not self.S:
+            return np.zeros(0)
+        coefs = np.concatenate([s * cab.points.bary[cab.segments[:, e]].ravel() for e, s in ((0, -1.0), (1, 1.0))])
+        return coefs[self._ns_order]
+
+    def move_cables(self, cables: CableSet) -> None:
+        """Replace the cables by ``cables`` whose points lie in the same triangles
+        (only their barycentric weights and the rest lengths differ: a route moved
+        a little), in place; the positions and contractions stay."""
+        old = self.cables
+        if (cables.segments.shape != old.segments.shape or not np.array_equal(cables.points.tri, old.points.tri)
+                or not np.array_equal(cables.start, old.start) or cables.friction != old.friction):
+            raise ValueError("move_cables needs the same cables with their points in the same triangles")
+        self.cables = cables
+        self.write("PT_BARY", cables.points.bary)
+        self.write("NS_COEF", self._segment_coefficients(cables))
+        self.write("A0", cables.a0)
+        self.capstan = Capstan(cables, cables.points.positions(self.mesh.triangles, self.mesh.nodes),
+                               cables.friction) if cables.has_friction else None
+        self.point_map = PointMap(self.mesh.triangles, cables.points.tri, cables.points.bary, self.fixed)
 
     # ------------------------------------------------------------ host access to the buffers
     def read(self, name: str, count: int, at: int = 0) -> np.ndarray:

@@ -232,3 +232,8 @@ class CGSolver(LinearSolver):
     def reset(self) -> None:
         if self.pre is not None:
             self.pre.reset()
+
+    def cables_moved(self) -> None:
+        if self.pre is not None:
+            self.pre.direct.cables_moved()
+        self.reset()

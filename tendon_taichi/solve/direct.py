@@ -121,6 +121,13 @@ class DirectSolver(LinearSolver):
         self.shape = (nf, nf)
         self.nnz = len(uniq)
 
+    def cables_moved(self) -> None:
+        """New barycentric weights of the cables' points (the same triangles: the
+        sparsity pattern holds); the last factorization is forgotten."""
+        cab = self.model.cables
+        self.seg_coef = np.concatenate([-cab.points.bary[cab.segments[:, 0]], cab.points.bary[cab.segments[:, 1]]], 1)
+        self.reset()
+
     def _element_order(self, edofs: np.ndarray, free_index: np.ndarray, nf: int) -> np.ndarray:
         mesh = self.model.mesh
         key = self.free.tobytes()

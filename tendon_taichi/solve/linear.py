@@ -91,3 +91,8 @@ class LinearSolver(ABC):
     @abstractmethod
     def reset(self) -> None:
         """Forget reused state (a stage start must not depend on earlier stages)."""
+
+    def cables_moved(self) -> None:
+        """The model's cables moved within their triangles (:meth:`~tendon_taichi.physics.model.Model.move_cables`):
+        forget what depended on them."""
+        self.reset()
