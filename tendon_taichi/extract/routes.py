@@ -170,28 +170,38 @@ PUSH_SMOOTHING = 0.005
 PUSH_WEIGHT = 10.0
 
 
+def along_segments(B: np.ndarray, parts: int = 4) -> np.ndarray:
+    """Rows of B ((k, m): waypoints from control points) for ``parts`` evenly spread
+    points along every segment between consecutive waypoints, the last waypoint
+    included: ((k - 1) parts + 1, m), the polyline's points linear in the control points."""
+    t = np.arange(parts) / parts
+    rows = (1.0 - t)[None, :, None] * B[:-1, None, :] + t[None, :, None] * B[1:, None, :]
+    return np.vstack([rows.reshape(-1, B.shape[1]), B[-1:]])
+
+
 def keep_clear(route: Route, walls: Walls, clearance: float, iterations: int = 40) -> Route | None:
-    """The route made to keep ``clearance`` (m) from the walls: an end that runs
-    head-on into a wall is cut back along the route (the tendon ends inside the
-    body), then the control points are moved (least change, by repeated fits)
-    until every waypoint keeps the clearance; None when that cannot be done (the
+    """The route made to keep ``clearance`` (m) from the walls along its whole
+    polyline (waypoints and the segments between them): an end that runs head-on
+    into a wall is cut back along the route (the tendon ends inside the body),
+    then the control points are moved (least change, by repeated fits) until
+    every point of it keeps the clearance; None when that cannot be done (the
     route runs where the body is too narrow)."""
     pts = route.waypoints
-    d = walls.distance(pts)
-    if d.min() >= clearance * (1.0 - 1e-6):
+    if walls.polyline_distance(pts) >= clearance * (1.0 - 1e-6):
         return route
-    if min(d[0], d[-1]) < clearance:
+    d = walls.distance(pts[[0, -1]])
+    if d.min() < clearance:
         route = route.with_control(fit_control(_trim_ends(pts, walls, clearance * (1.0 + 1e-3)),
                                                len(route.control)))
-    B = route.basis
+    B = along_segments(route.basis)
     control = route.control.copy()
     for _ in range(iterations):
         pts = B @ control
         d, g = walls.distance_gradient(pts)
-        short = d < clearance * (1.0 - 1e-6)
+        short = d < clearance * (1.0 + 1e-3)
         if not short.any():
             return route.with_control(control)
-        # push the short waypoints in by what they lack (and a little more), and refit,
+        # push the short points in by what they lack (and a little more), and refit,
         # holding the pushed ones harder than the others
         target = pts + np.where(short[:, None], g * (clearance * 1.1 - d)[:, None], 0.0)
         control = smooth_fit(B, target, PUSH_SMOOTHING, weights=np.where(short, PUSH_WEIGHT, 1.0))
