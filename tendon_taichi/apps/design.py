@@ -25,9 +25,9 @@ from ..body.scene import Scene
 from ..errors import InputError
 from ..extract.consolidation import Layout, finish
 from ..extract.metrics import MetricSettings, tendon_metrics
+from ..extract.realizable import as_built_arrays
 from ..extract.settings import BUDGET, ConsolidationSettings
 from ..files import check_writable, file_stem, write_json
-from ..extract.realizable import as_built_arrays
 from ..io.drawing import write_svg
 from ..io.export import write_as_built
 from ..io.plots import plot_design, plot_front

@@ -295,23 +295,12 @@ def story_figure(problem: Problem, planted: dict | None, stage0, final, extracto
     :class:`~tendon_taichi.apps.extract.ExtractorResult`)."""
     fig = new_figure(figsize=(19, 4.0))
     axes = fig.subplots(1, 5)
-    T, X = problem.mesh.triangles, problem.mesh.nodes
+    T = problem.mesh.triangles
     colors = palette()
     pose = problem.pose(0)
 
     def frame(ax, x, title):
-        ax.triplot(X[:, 0], X[:, 1], T, color="0.88", lw=0.4)
-        if x is not None:
-            ax.triplot(x[:, 0], x[:, 1], T, color="0.72", lw=0.4)
-        goal = pose.target_goal
-        ax.scatter(goal[:, 0], goal[:, 1], s=40, marker="x", color="tab:green", zorder=5)
-        if x is not None:
-            now = pose.target_positions(x)
-            ax.scatter(now[:, 0], now[:, 1], s=18, color="tab:blue", zorder=5)
-        ax.set_title(title, fontsize=9)
-        ax.set_aspect("equal")
-        ax.set_xticks([])
-        ax.set_yticks([])
+        _frame(ax, problem, x, title)
 
     ax = axes[0]
     if planted is not None:
@@ -332,16 +321,11 @@ def story_figure(problem: Problem, planted: dict | None, stage0, final, extracto
     m = extractor.metrics
     frame(ax, None, f"4. routes ({extractor.name}): {m['count']} tendons, "
                     f"{100 * m['total_length']:.1f} cm\n{m['kinks']} kinks, capstan worst {m['capstan_worst']:.2f}")
-    for i, t in enumerate(extractor.tendons):
-        ax.plot(t.waypoints[:, 0], t.waypoints[:, 1], color=colors[i % len(colors)], lw=2.2)
-        ax.plot(*t.waypoints[0], "o", color=colors[i % len(colors)], ms=4)
-        ax.plot(*t.waypoints[-1], "s", color=colors[i % len(colors)], ms=4)
+    _routes(ax, [t.waypoints for t in extractor.tendons])
     ax = axes[4]
     x = extractor.realizable.x
     frame(ax, x, f"5. as built (only those tendons, with friction)\npose {100 * m['realizable_pose_error_rel']:.2f}% of L")
-    for i, t in enumerate(extractor.tendons):
-        w = problem.embed_waypoints(t.nodes, t.waypoints).positions(T, x)
-        ax.plot(w[:, 0], w[:, 1], color=colors[i % len(colors)], lw=2.2)
+    _routes(ax, [problem.embed_waypoints(t.nodes, t.waypoints).positions(T, x) for t in extractor.tendons])
     fig.tight_layout()
     return fig
 
