@@ -18,17 +18,6 @@ from tendon_taichi.io.recording import read_chunks
 COMPARE = ("compare", "--no-consolidate", "--extractors", "strands", "--json")
 
 
-@pytest.fixture(scope="module")
-def run_rrd(tmp_path_factory):
-    from conftest import run_cli
-
-    d = tmp_path_factory.mktemp("conc")
-    r = run_cli("optimize", "t_shape", "--stage-iterations", "25", "--k-min", "0.1", "--record", d / "run.rrd",
-                "--quiet", cwd=d)
-    assert r.returncode == 0, r.stderr
-    return d / "run.rrd"
-
-
 def _start(rec, stage):
     return subprocess.Popen([sys.executable, "-m", "tendon_taichi", COMPARE[0], str(rec), *COMPARE[1:],
                              "--stage", str(stage)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -17,17 +17,6 @@ PLUGIN = Path(__file__).parent / "plugins" / "demo_extractor"
 
 
 @pytest.fixture(scope="module")
-def run_rrd(tmp_path_factory):
-    from conftest import run_cli
-
-    d = tmp_path_factory.mktemp("ext")
-    r = run_cli("optimize", "t_shape", "--stage-iterations", "25", "--k-min", "0.1", "--record", d / "run.rrd",
-                "--quiet", cwd=d)
-    assert r.returncode == 0, r.stderr
-    return d / "run.rrd"
-
-
-@pytest.fixture(scope="module")
 def plugin_path(tmp_path_factory):
     """The demo plugin installed (pip, no build isolation) into a folder of its own."""
     target = tmp_path_factory.mktemp("site")
@@ -82,7 +71,7 @@ def test_extract_writes_json_svg_and_logs_into_the_recording(run_rrd, cli, tmp_p
     assert "/tendons/path_cover/summary" in ents and "/tendons/path_cover/rest" in ents
     assert len(read_recording(rec).stages) == 5
     assert json.loads(cli("replay", rec, "--json").stdout)["reproduces"]
-    r2 = cli("extract", rec, "--extractor", "path_cover", "--stage", 2, "--no-record", "--json")
+    r2 = cli("extract", rec, "--extractor", "path_cover", "--stage", 2, "--no-record", "--no-consolidate", "--json")
     assert json.loads(r2.stdout)["stage"] == 2
 
 
