@@ -160,6 +160,25 @@ def test_recommendation_is_the_fewest_tendons_within_the_budget():
     assert recommend(entries, 0.005, 1)[1] == "1-0.02-1.0-0.1"
 
 
+def test_the_table_marks_the_recommended_design_once():
+    from tendon_taichi.cli.design import table
+
+    def row(count, err, src):
+        return {"count": count, "realizable_pose_error_rel": err, "capstan_worst": 0.99, "kinks": 0,
+                "total_length": 0.1, "source": src}
+
+    metrics = {**row(2, 0.003, "strands"), "realizable_pose_error_rel_frictionless": 0.003, "clearance_min": 0.002}
+    summary = {"scene": "s", "resolution": 1, "body_size": 0.1, "friction": 0.1, "clearance": 0.02, "budget": 0.005,
+               "front": [row(1, 0.02, "strands"), row(2, 0.003, "strands")], "files": {},
+               "recommended": {"count": 2, "source": "strands", "metrics": metrics, "tendons": []}}
+    rows = [ln for ln in table(summary) if re.match(r"\s+\d+ [ *] ", ln)]
+    assert [ln.split()[:2] for ln in rows] == [["1", "2.00%"], ["2", "*"]]  # the same layout: one row
+    summary["front"][1] = row(2, 0.004, "path_cover")  # routes optimized after the front: both rows
+    rows = [ln for ln in table(summary) if re.match(r"\s+\d+ [ *] ", ln)]
+    assert [ln.split()[0] for ln in rows] == ["1", "2", "2"] and rows[2].split()[1] == "*"
+    assert "path_cover" in rows[1] and "strands" in rows[2]
+
+
 @pytest.mark.parametrize("args, message", [
     (["--friction", "-0.1"], "--friction must be a number in [0, 2]"),
     (["--friction", "nan"], "--friction must be a number in [0, 2]"),

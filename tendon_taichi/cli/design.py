@@ -34,11 +34,18 @@ def table(summary: dict) -> list[str]:
     chosen = {"count": rec["count"], "realizable_pose_error_rel": m["realizable_pose_error_rel"],
               "capstan_worst": m["capstan_worst"], "kinks": m["kinks"], "total_length": m["total_length"],
               "source": rec["source"]}
+    def line(row: dict, mark: str) -> str:
+        return (f"{row['count']:>5}{mark} {100 * row['realizable_pose_error_rel']:>8.2f}% "
+                f"{row['capstan_worst']:>7.3f} {row['kinks']:>5} {100 * row['total_length']:>5.1f} cm  "
+                f"{row['source']}")
+
     for e in summary["front"]:
-        for row, mark in ((e, "  "), (chosen, " *")) if e["count"] == rec["count"] else ((e, "  "),):
-            out.append(f"{row['count']:>5}{mark} {100 * row['realizable_pose_error_rel']:>8.2f}% "
-                       f"{row['capstan_worst']:>7.3f} {row['kinks']:>5} {100 * row['total_length']:>5.1f} cm  "
-                       f"{row['source']}")
+        if e["count"] != rec["count"]:
+            out.append(line(e, "  "))
+            continue
+        if line(e, "") != line(chosen, ""):  # the front's entry, then the recommended design made of it
+            out.append(line(e, "  "))
+        out.append(line(chosen, " *"))
     out.append(f"recommended: {rec['count']} tendon(s) (from {rec['source']}), as built "
                f"{100 * m['realizable_pose_error_rel']:.2f}% of L (frictionless "
                f"{100 * m['realizable_pose_error_rel_frictionless']:.2f}%), worst capstan {m['capstan_worst']:.3f}, "
