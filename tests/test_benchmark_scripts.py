@@ -96,6 +96,8 @@ def test_make_results_writes_the_results_page(planted_results):
     rows = list(csv.DictReader(open(planted_results / "page" / "planted_bench_level1.csv")))
     assert [r["case"] for r in rows] == [case["case"]] and int(rows[0]["count"]) == case["count"]
     assert "same count at every level: 1 of 1" in (planted_results / "page" / "counts_by_level.md").read_text()
+    assert (planted_results / "page" / "worst_cases.png").read_bytes()[:4] == b"\x89PNG"
+    assert f"{case['case']} at level 1" in page and "![the worst results](worst_cases.png)" in page
 
 
 def test_reextract_reproduces_the_run(planted_results, tmp_path):

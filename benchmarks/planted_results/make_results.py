@@ -8,8 +8,9 @@ LEVEL --out RUNS/rLEVEL` (default settings, or the [optimize] settings given by
 --set; finished cases in RUNS are reused), then writes into DIR (default: this
 folder) planted_bench_level<LEVEL>.csv, gallery_level<LEVEL>.png,
 counts_by_level.md (benchmarks/planted/counts_by_level.py's table) and
-README.md, the results page: per level the suite's figures, per case its
-figures at every level, and the commit that made them. The default run (levels
+worst_cases.png (the three worst results over every level run) and README.md,
+the results page: per level the suite's figures, per case its figures at
+every level, and the commit that made them. The default run (levels
 1-3, 16 cases) takes a few hours on 2 cores.
 """
 
@@ -20,7 +21,8 @@ import sys
 import tomllib
 from pathlib import Path
 
-from tendon_taichi.planted.bench import route_rule, run_suite
+from tendon_taichi.planted.bench import load_suite, route_rule, run_suite
+from tendon_taichi.planted.gallery import gallery_figure
 from tendon_taichi.version import provenance
 
 HERE = Path(__file__).resolve().parent
@@ -43,7 +45,9 @@ worst capstan factor is at least the planted tendons' minus 0.05 (same mu) and
 it has no more kinks than they have. Per case: `planted_bench_level<N>.csv`;
 the galleries `gallery_level<N>.png` (planted tendons dashed, the design's
 routes in colour, anchor a circle, pull end a square); the count at every
-level: `counts_by_level.md`.
+level: `counts_by_level.md`; the three worst results over every level (misses
+first, then route-rule misses, then the highest as-built error):
+`worst_cases.png`.
 """
 
 
@@ -87,6 +91,24 @@ def per_case(runs: list[dict]) -> list[str]:
     return rows
 
 
+def worst(runs: list[dict], n: int = 3) -> list[tuple[int, dict]]:
+    """The ``n`` worst (level, case) results over every run: misses first, then
+    route-rule misses, then the highest as-built error."""
+    done = [(r["level"], c) for r in runs for c in r["cases"] if "error" not in c]
+    return sorted(done, key=lambda lc: (lc[1]["passed"], route_rule(lc[1]), -lc[1]["realizable_pose_error_rel"]))[:n]
+
+
+def worst_figure(runs: list[dict], path: Path) -> None:
+    """The gallery's panels (planted dashed, the design's routes in colour) of the
+    worst results, each titled with its level."""
+    chosen = worst(runs)
+    fig = gallery_figure({"cases": [c for _, c in chosen]}, {c.name: c for c in load_suite(SUITE)})
+    for ax, (level, _) in zip(fig.axes, chosen):
+        ax.set_title(f"level {level}: {ax.get_title()}", fontsize=7)
+    fig.suptitle("the worst results over every level: planted (dashed) vs designed (colour)", fontsize=10)
+    fig.savefig(path, dpi=110)
+
+
 def page(runs: list[dict]) -> str:
     p = runs[0].get("provenance") or provenance()
     settings = runs[0]["settings"] or "the defaults"
@@ -97,7 +119,11 @@ def page(runs: list[dict]) -> str:
         *summary(runs), "", "## Per case", "",
         "Tendons designed / planted (the extractor they came from), as-built pose error (% of L), worst capstan "
         "factor / the planted tendons', kinks.", "",
-        *per_case(runs), "", "## The count across levels", "", *counts_by_level.table(runs), ""])
+        *per_case(runs), "", "## The worst results", "",
+        "Misses first, then route-rule misses, then the highest as-built error: "
+        + ", ".join(f"{c['case']} at level {lv}" for lv, c in worst(runs)) + ".", "",
+        "![the worst results](worst_cases.png)", "",
+        "## The count across levels", "", *counts_by_level.table(runs), ""])
 
 
 def _setting(item: str):
@@ -126,6 +152,7 @@ def main(argv=None) -> int:
         shutil.copyfile(run_dir / "planted_bench.csv", args.out / f"planted_bench_level{level}.csv")
         shutil.copyfile(run_dir / "gallery.png", args.out / f"gallery_level{level}.png")
     (args.out / "counts_by_level.md").write_text("\n".join(counts_by_level.table(runs)) + "\n")
+    worst_figure(runs, args.out / "worst_cases.png")
     (args.out / "README.md").write_text(page(runs))
     print(f"wrote {args.out}/", file=sys.stderr)
     return 0
