@@ -34,6 +34,7 @@ def table(summary: dict) -> list[str]:
     chosen = {"count": rec["count"], "realizable_pose_error_rel": m["realizable_pose_error_rel"],
               "capstan_worst": m["capstan_worst"], "kinks": m["kinks"], "total_length": m["total_length"],
               "source": rec["source"]}
+
     def line(row: dict, mark: str) -> str:
         return (f"{row['count']:>5}{mark} {100 * row['realizable_pose_error_rel']:>8.2f}% "
                 f"{row['capstan_worst']:>7.3f} {row['kinks']:>5} {100 * row['total_length']:>5.1f} cm  "
