@@ -82,8 +82,13 @@ def test_compare_runs_every_extractor_with_a_picture(run_rrd, cli, tmp_path):
     out = json.loads(r.stdout)
     assert {e["name"] for e in out["extractors"]} >= {"strands", "network_discovery", "path_cover"}
     assert all("error" not in e for e in out["extractors"]) and png.read_bytes()[:4] == b"\x89PNG"
-    table = cli("compare", run_rrd, "--no-record", "--no-consolidate", "--extractors", "strands", "path_cover").stdout
-    assert "strands" in table and "path_cover" in table and "as built" in table
+    r = cli("compare", run_rrd, "--no-record", "--no-consolidate", "--extractors", "strands", "path_cover")
+    assert "strands" in r.stdout and "path_cover" in r.stdout and "as built" in r.stdout
+    progress = r.stderr.splitlines()  # a line as each extractor starts and one with its result
+    assert progress[0] == "compare: strands: extracting" and progress[1].startswith("compare: strands: ")
+    assert "compare: path_cover: extracting" in progress and "as built" in progress[-1]
+    quiet = cli("compare", run_rrd, "--no-record", "--no-consolidate", "--extractors", "strands", "--quiet")
+    assert quiet.returncode == 0 and quiet.stderr == "" and "strands" in quiet.stdout
     raw = json.loads(cli("compare", run_rrd, "--no-record", "--no-consolidate", "--json").stdout)
     for e in raw["extractors"]:
         assert e["consolidation"]["steps"] == [] and e["consolidation"]["evaluations"] == 0
@@ -147,6 +152,7 @@ def test_a_plugin_that_hangs_is_given_up(run_rrd, cli, plugin_path):
     assert r.returncode == 4 and time.perf_counter() - t0 < 300, r.stderr  # the plugin sleeps 600 s
     out = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
     assert out["sleeps"]["error"] == "extractor 'sleeps' did not finish within 1 s (--plugin-timeout)"
+    assert "compare: sleeps: extracting" in r.stderr.splitlines()  # the user sees what it is waiting for
     assert "error" not in out["strands"] and out["strands"]["metrics"]["count"] >= 1
     _one_line(cli("compare", run_rrd, "--no-record", "--plugin-timeout", "0"), "--plugin-timeout must be")
 
@@ -168,7 +174,7 @@ def test_a_recording_that_cannot_be_rewritten_keeps_the_results(run_rrd, tmp_pat
     out = json.loads(got.out)
     assert out["extractors"][0]["metrics"]["count"] >= 1
     assert out["record_error"].startswith(f"the tendons were not logged into '{rec}' (Permission denied)")
-    lines = got.err.strip().splitlines()
+    lines = [ln for ln in got.err.strip().splitlines() if not ln.startswith("compare: ")]  # progress aside
     assert len(lines) == 1 and lines[0].startswith("tendon-taichi: error: the tendons were not logged into")
     assert rec.read_bytes() == run_rrd.read_bytes() and os.listdir(tmp_path) == ["run.rrd"]
 

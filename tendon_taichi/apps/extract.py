@@ -112,14 +112,16 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
     most ``timeout`` s), check its tendons (:mod:`~tendon_taichi.extract.checks`),
     turn them into routes, consolidate and optimize them on the as-built robot
     (:mod:`~tendon_taichi.extract.consolidation`) and score them; a failing plugin
-    gives a result with ``error`` instead of raising. ``log(text)`` hears of
-    consolidation's steps. ``done`` maps the tendons of extractors run before
+    gives a result with ``error`` instead of raising. ``log(text)`` hears when the
+    plugin starts, of consolidation's steps and of the result. ``done`` maps the tendons of extractors run before
     (their waypoints) to their consolidation: the same tendons are not
     consolidated twice."""
     t0 = time.perf_counter()
+    say = log or (lambda text: None)
     try:
         ext = load_extractor(name)
         opts = ext.make_options(options) if hasattr(ext, "make_options") else options
+        say(f"{name}: extracting")
         view, seen = read_only_copy(problem), read_only_copy(state)
         found = call_plugin(name, lambda: ext.extract(view, seen, opts), timeout)
         tendons = check_tendons(name, found, problem)
@@ -133,7 +135,7 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
     try:
         if done is not None and key in done:
             cons = done[key].relabel(name)
-            (log or (lambda text: None))(f"{name}: the same tendons as {done[key].layout.source}")
+            say(f"{name}: the same tendons as {done[key].layout.source}")
         else:
             cons = consolidate(problem, tendons, state, run.settings, consolidation or ConsolidationSettings(),
                                solver, source=name, log=log)
@@ -155,8 +157,9 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
     metrics["extracted_count"] = cons.extracted_count
     if real.poses is not None:
         metrics["realizable_pose_errors_rel"] = [r.pose_error_rel for r in real.poses]
-    return ExtractorResult(name, tendons, metrics, real, time.perf_counter() - t0,
-                           pose_names=problem.pose_names, consolidation=cons)
+    dt = time.perf_counter() - t0
+    say(f"{name}: {len(tendons)} tendon(s), as built {100 * real.pose_error_rel:.2f}% of L ({dt:.1f} s)")
+    return ExtractorResult(name, tendons, metrics, real, dt, pose_names=problem.pose_names, consolidation=cons)
 
 
 def frictionless_error(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings, solver: str,

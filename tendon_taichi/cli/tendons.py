@@ -159,13 +159,21 @@ def consolidation(args, budget: float | None = None) -> ConsolidationSettings:
                                  budget, args.refine, args.screen)
 
 
+def _progress(args, command: str):
+    """``log(text)`` for the extraction: a ``COMMAND: text`` line on stderr (none with --quiet)."""
+    from ..io.progress import Progress
+
+    progress = Progress(enabled=not args.quiet)
+    return lambda text: progress.message(f"{command}: {text}")
+
+
 def cmd_extract(args) -> int:
     from ..apps.extract import extract
 
     options = _parse_options(args.option, args.extractor)
     ex = extract(args.recording, [args.extractor], stage=args.stage, options=options, solver=args.solver,
                  record=not args.no_record, consolidation=consolidation(args), on_wait=_waiting(args),
-                 plugin_timeout=plugin_timeout(args), **tendon_settings(args))
+                 plugin_timeout=plugin_timeout(args), log=_progress(args, "extract"), **tendon_settings(args))
     r = ex.results[0]
     if r.error is not None:
         raise TendonError(r.error)
@@ -186,7 +194,8 @@ def cmd_compare(args) -> int:
 
     ex = extract(args.recording, args.extractors, stage=args.stage, options=_parse_options(args.option, None),
                  solver=args.solver, record=not args.no_record, consolidation=consolidation(args),
-                 on_wait=_waiting(args), plugin_timeout=plugin_timeout(args), **tendon_settings(args))
+                 on_wait=_waiting(args), plugin_timeout=plugin_timeout(args), log=_progress(args, "compare"),
+                 **tendon_settings(args))
     return _extraction_output(args, ex)
 
 
@@ -228,5 +237,6 @@ def add_commands(sub) -> None:
         add_tendon_flags(s)
         s.add_argument("--plugin-timeout", type=float, default=PLUGIN_TIMEOUT, metavar="S",
                        help=f"give up on an extractor that runs longer than S seconds (default {PLUGIN_TIMEOUT:g})")
+        s.add_argument("--quiet", action="store_true", help="no progress on stderr")
         add_json(s)
         s.set_defaults(func=cmd_extract if name == "extract" else cmd_compare)
