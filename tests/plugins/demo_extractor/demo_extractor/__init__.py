@@ -44,30 +44,37 @@ class Mutates(Extractor):
         return []
 
 
-class Outside(Extractor):
-    """Breaks the rules: a tendon whose waypoints lie 1 m beside its nodes."""
+class DamagedWaypoints(StrongestFiber):
+    """Breaks the rules: the strongest fiber's tendon with its waypoints changed
+    by :meth:`damage` (not registered itself; its subclasses are)."""
+
+    def damage(self, waypoints):
+        raise NotImplementedError
+
+    def extract(self, problem, state, options):
+        t = super().extract(problem, state, options)[0]
+        t.waypoints = self.damage(t.waypoints)
+        return [t]
+
+
+class Outside(DamagedWaypoints):
+    """A tendon whose waypoints lie 1 m beside its nodes."""
 
     name = "outside"
     description = "returns waypoints far outside the body (test plugin)"
-    api = EXTRACTOR_API
 
-    def extract(self, problem, state, options):
-        t = StrongestFiber().extract(problem, state, options)[0]
-        t.waypoints = t.waypoints + 1.0
-        return [t]
+    def damage(self, waypoints):
+        return waypoints + 1.0
 
 
-class NanWaypoints(Extractor):
-    """Breaks the rules: a tendon with NaN waypoints."""
+class NanWaypoints(DamagedWaypoints):
+    """A tendon with NaN waypoints."""
 
     name = "nan_waypoints"
     description = "returns NaN waypoints (test plugin)"
-    api = EXTRACTOR_API
 
-    def extract(self, problem, state, options):
-        t = StrongestFiber().extract(problem, state, options)[0]
-        t.waypoints = t.waypoints * float("nan")
-        return [t]
+    def damage(self, waypoints):
+        return waypoints * float("nan")
 
 
 class Sleeps(Extractor):
