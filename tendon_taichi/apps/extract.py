@@ -113,9 +113,9 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
     turn them into routes, consolidate and optimize them on the as-built robot
     (:mod:`~tendon_taichi.extract.consolidation`) and score them; a failing plugin
     gives a result with ``error`` instead of raising. ``log(text)`` hears when the
-    plugin starts, of consolidation's steps and of the result. ``done`` maps the tendons of extractors run before
-    (their waypoints) to their consolidation: the same tendons are not
-    consolidated twice."""
+    plugin starts, of consolidation's steps and of the result. ``done`` maps the
+    tendons of extractors run before (their waypoints) to their consolidation:
+    the same tendons are not consolidated twice."""
     t0 = time.perf_counter()
     say = log or (lambda text: None)
     try:
