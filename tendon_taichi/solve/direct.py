@@ -99,8 +99,7 @@ class DirectSolver(LinearSolver):
         edofs = (2 * T[:, :, None] + np.arange(2)).reshape(-1, 6)  # (m, 6)
         pt_nodes = T[cab.points.tri] if m.P else np.zeros((0, 3), np.int64)
         seg_nodes = np.concatenate([pt_nodes[cab.segments[:, 0]], pt_nodes[cab.segments[:, 1]]], 1)
-        self.seg_coef = np.concatenate([-cab.points.bary[cab.segments[:, 0]],
-                                        cab.points.bary[cab.segments[:, 1]]], 1)  # (S, 6)
+        self.seg_coef = _segment_coefficients(cab)
         self.sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)  # (S, 12)
         rows = [np.repeat(edofs, 6, axis=1).ravel(), np.repeat(self.sdofs, 12, axis=1).ravel()]
         cols = [np.tile(edofs, (1, 6)).ravel(), np.tile(self.sdofs, (1, 12)).ravel()]
@@ -124,8 +123,7 @@ class DirectSolver(LinearSolver):
     def cables_moved(self) -> None:
         """New barycentric weights of the cables' points (the same triangles: the
         sparsity pattern holds); the last factorization is forgotten."""
-        cab = self.model.cables
-        self.seg_coef = np.concatenate([-cab.points.bary[cab.segments[:, 0]], cab.points.bary[cab.segments[:, 1]]], 1)
+        self.seg_coef = _segment_coefficients(self.model.cables)
         self.reset()
 
     def _element_order(self, edofs: np.ndarray, free_index: np.ndarray, nf: int) -> np.ndarray:
@@ -270,3 +268,8 @@ def _fill_reducing_order(rows: np.ndarray, cols: np.ndarray, n: int) -> np.ndarr
     lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                    options={"SymmetricMode": True})
     return np.asarray(lu.perm_c, dtype=np.int64)
+
+
+def _segment_coefficients(cab) -> np.ndarray:
+    """(S, 6): each segment's signed barycentric weights, -start point then +end point."""
+    return np.concatenate([-cab.points.bary[cab.segments[:, 0]], cab.points.bary[cab.segments[:, 1]]], 1)
