@@ -18,9 +18,12 @@ from tendon_taichi.io.recording import read_chunks
 COMPARE = ("compare", "--no-consolidate", "--extractors", "strands", "--json")
 
 
-def _start(rec, stage):
+def _start(rec, stage, into=None):
+    """A compare logging strands' tendons into the recording (or the file ``into``)."""
+    record = ["--record"] if into is None else ["--record", str(into)]
     return subprocess.Popen([sys.executable, "-m", "tendon_taichi", COMPARE[0], str(rec), *COMPARE[1:],
-                             "--stage", str(stage)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--stage", str(stage), *record], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
 
 
 def _logged_stages(rec) -> set[int]:
@@ -36,17 +39,20 @@ def _copy(run_rrd, folder):
     return shutil.copyfile(run_rrd, folder / "run.rrd")
 
 
-@pytest.mark.parametrize("trial", range(3))
-def test_concurrent_compares_keep_every_result(run_rrd, tmp_path, trial):
+@pytest.mark.parametrize("trial,own_file", [(0, False), (1, False), (2, True)])
+def test_concurrent_compares_keep_every_result(run_rrd, tmp_path, trial, own_file):
     rec = _copy(run_rrd, tmp_path / "d")
-    a = _start(rec, 3)
+    into = rec.parent / "tendons.rrd" if own_file else None
+    a = _start(rec, 3, into)
     time.sleep(0.1)
-    b = _start(rec, 4)
+    b = _start(rec, 4, into)
     for p in (a, b):
         _, err = p.communicate(timeout=300)
         assert p.returncode == 0, err
-    assert _logged_stages(rec) == {3, 4}
-    assert os.listdir(rec.parent) == ["run.rrd"]
+    assert _logged_stages(into or rec) == {3, 4}
+    assert sorted(os.listdir(rec.parent)) == (["run.rrd", "tendons.rrd"] if own_file else ["run.rrd"])
+    if own_file:
+        assert rec.read_bytes() == run_rrd.read_bytes()
 
 
 def test_a_writer_waits_for_the_lock(run_rrd, tmp_path):

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tendon_taichi.io.recording import read_recording
+from tendon_taichi.io.recording import TENDONS_OF, read_recording, rewrite
 
 PLUGIN = Path(__file__).parent / "plugins" / "demo_extractor"
 
@@ -38,7 +38,8 @@ def test_extract_writes_json_svg_and_logs_into_the_recording(run_rrd, cli, tmp_p
     rec = tmp_path / "copy.rrd"
     rec.write_bytes(run_rrd.read_bytes())
     svg = tmp_path / "t.svg"
-    r = cli("extract", rec, "--extractor", "path_cover", "--option", "min_length=0.005", "--svg", svg, "--json")
+    r = cli("extract", rec, "--extractor", "path_cover", "--option", "min_length=0.005", "--svg", svg, "--record",
+            "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out["stage"] == 4 and len(out["extractors"]) == 1
@@ -69,10 +70,57 @@ def test_extract_writes_json_svg_and_logs_into_the_recording(run_rrd, cli, tmp_p
     from rerun.chunk import RrdReader
     ents = {c.entity_path for c in RrdReader(rec).stream()}
     assert "/tendons/path_cover/summary" in ents and "/tendons/path_cover/rest" in ents
-    assert len(read_recording(rec).stages) == 5
+    assert out["record"] == str(rec) and len(read_recording(rec).stages) == 5
     assert json.loads(cli("replay", rec, "--json").stdout)["reproduces"]
     r2 = cli("extract", rec, "--extractor", "path_cover", "--stage", 2, "--no-record", "--no-consolidate", "--json")
     assert json.loads(r2.stdout)["stage"] == 2
+
+
+def test_reading_a_recording_changes_it_only_when_asked(run_rrd, cli, tmp_path):
+    """Without --record the recording is only read and nothing is written beside it;
+    --record FILE puts the tendons in a file of their own with the run's recording
+    id (the viewer shows the two as one recording), and never into a stranger's."""
+    from rerun.chunk import RrdReader
+
+    folder = tmp_path / "d"
+    folder.mkdir()
+    rec = folder / "run.rrd"
+    rec.write_bytes(run_rrd.read_bytes())
+    quick = ("--no-consolidate", "--extractors", "strands")
+    r = cli("compare", rec, *quick)
+    assert r.returncode == 0, r.stderr
+    assert "tendons logged" not in r.stdout
+    assert rec.read_bytes() == run_rrd.read_bytes() and os.listdir(folder) == ["run.rrd"]
+
+    own = folder / "tendons.rrd"
+    for stage in (3, 4):
+        r = cli("compare", rec, *quick, "--stage", stage, "--record", own)
+        assert r.returncode == 0, r.stderr
+        assert f"tendons logged into: {own}" in r.stdout
+    assert rec.read_bytes() == run_rrd.read_bytes()
+    run_id = RrdReader(rec).recordings()[0].recording_id
+    assert RrdReader(own).recordings()[0].recording_id == run_id
+    chunks = list(RrdReader(own).stream())
+    stages = {s for ch in chunks if ch.entity_path == "/tendons/strands/summary"
+              for s in ch.to_record_batch().column("stage").to_pylist()}
+    assert stages == {3, 4}  # the second run kept the first one's tendons
+    assert sum(ch.entity_path == "/meta/tendons_of" for ch in chunks) == 1
+    assert not any(ch.entity_path.startswith(("/stages", "/problem")) for ch in chunks)  # tendons only
+    _one_line(cli("extract", own, "--extractor", "strands"), "holds only the tendons extracted from the run")
+
+    other = folder / "other.rrd"
+    other.write_bytes(run_rrd.read_bytes())  # a run's recording, not a tendons file
+    stranger = folder / "stranger.rrd"  # the tendons of another run
+    rewrite(stranger, "another-run", lambda ch: True,
+            lambda rr, rec: rec.log(TENDONS_OF, rr.TextDocument(json.dumps({"recording": "x.rrd",
+                                                                          "run_id": "another-run"})), static=True),
+            lock=rec)
+    for target, text in ((other, "does not hold tendons of"), (stranger, "does not hold tendons of"),
+                         (folder / "t.txt", "must name an .rrd file"), (folder, "must name an .rrd file")):
+        before = sorted(os.listdir(folder))
+        _one_line(cli("compare", rec, *quick, "--record", target), text)
+        assert sorted(os.listdir(folder)) == before
+    _one_line(cli("compare", rec, *quick, "--record", "--no-record"), "contradict")
 
 
 def test_compare_runs_every_extractor_with_a_picture(run_rrd, cli, tmp_path):
@@ -169,7 +217,7 @@ def test_a_recording_that_cannot_be_rewritten_keeps_the_results(run_rrd, tmp_pat
     monkeypatch.setattr(recording, "replace_with_bytes", refuse)
     rec = tmp_path / "run.rrd"
     rec.write_bytes(run_rrd.read_bytes())
-    assert main(["compare", str(rec), "--no-consolidate", "--extractors", "strands", "--json"]) == 2
+    assert main(["compare", str(rec), "--no-consolidate", "--extractors", "strands", "--record", "--json"]) == 2
     got = capsys.readouterr()
     out = json.loads(got.out)
     assert out["extractors"][0]["metrics"]["count"] >= 1

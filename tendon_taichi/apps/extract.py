@@ -20,7 +20,9 @@ from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.plugins import available_extractors, load_extractor
 from ..extract.protocol import IdealizedState, PluginError, Tendon
 from ..extract.realizable import RealizableResult, deformed_waypoints, solve_realizable_poses
-from ..io.recording import RecordedRun, chunk_at_stage, mesh_edges, read_recording, rewrite
+from ..files import check_writable
+from ..io.recording import (TENDONS_OF, RecordedRun, RecordingError, chunk_at_stage, mesh_edges, read_recording,
+                            rewrite, tendons_owner)
 from ..optimizer.soft_ik import state_solver
 from ..physics.model import Model
 
@@ -68,7 +70,8 @@ class Extraction:
     state: IdealizedState
     idealized_pose_error: float
     results: list[ExtractorResult]
-    record_error: str | None = None  # why the tendons could not be logged into the recording
+    record: str | None = None  # the file the tendons were logged into
+    record_error: str | None = None  # why the tendons could not be logged
 
     def as_json(self) -> dict:
         out = {"recording": str(self.run.path), "scene": self.run.meta.get("scene"),
@@ -77,6 +80,8 @@ class Extraction:
                "body_size": self.problem.size, "idealized_pose_error": self.idealized_pose_error,
                "idealized_pose_error_rel": self.idealized_pose_error / self.problem.size,
                "extractors": [r.as_json() for r in self.results]}
+        if self.record is not None:
+            out["record"] = self.record
         if self.record_error is not None:
             out["record_error"] = self.record_error
         return out
@@ -175,7 +180,7 @@ def frictionless_error(problem: Problem, tendons: list[Tendon], state: Idealized
 
 def extract(path: str | Path, names: list[str] | None = None, stage: int | None = None,
             options: dict[str, dict] | None = None, solver: str = "recorded",
-            metric_settings: MetricSettings | None = None, record: bool = True,
+            metric_settings: MetricSettings | None = None, record: bool | str | Path = False,
             consolidation: ConsolidationSettings | None = None, on_wait=None,
             plugin_timeout: float = PLUGIN_TIMEOUT, friction: float | None = None,
             clearance: float | None = None, log=None) -> Extraction:
@@ -183,10 +188,13 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     ``plugin_timeout`` s) on a recorded stage (default: the last completed), each
     followed by consolidation (default settings unless ``consolidation`` is
     given); ``friction`` and ``clearance`` replace the scene's [tendons] settings
-    where given; with ``record``, log their tendons into the
-    recording (:func:`log_tendons`; ``on_wait`` is called if another process is
-    writing it; when that fails, the results are kept and ``record_error`` says why)."""
+    where given. The recording is only read, unless ``record`` asks to log the
+    tendons: True into the recording itself, a path into a file of their own that
+    the viewer shows with the run (:func:`log_tendons`; ``on_wait`` is called if
+    another process is writing; when that fails, the results are kept and
+    ``record_error`` says why)."""
     run = read_recording(path)
+    target = record_target(run, record)
     if not run.stages:
         raise InputError(f"'{path}' has no completed stage to extract from")
     if stage is None:
@@ -206,29 +214,60 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout, log,
                              done) for n in names]
     out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
-    if record and any(r.error is None for r in results):
+    if target is not None and any(r.error is None for r in results):
         try:
-            log_tendons(out, on_wait)
-        except OSError as exc:
-            out.record_error = (f"the tendons were not logged into '{path}' ({exc.strerror or exc}); "
-                                f"the results above are complete (--no-record skips logging)")
+            log_tendons(out, on_wait, target)
+            out.record = str(target)
+        except (OSError, RecordingError) as exc:
+            why = exc.strerror or exc if isinstance(exc, OSError) else exc
+            out.record_error = f"the tendons were not logged into '{target}' ({why}); the results above are complete"
     return out
 
 
-def log_tendons(ex: Extraction, on_wait=None) -> None:
-    """Add each extractor's tendons (rest and realizable) and summary to the run's
-    recording under ``/tendons/<extractor>`` at the stage they came from; an
-    earlier extraction by the same extractor at the same stage is replaced
-    (:func:`~tendon_taichi.io.recording.rewrite`: locked, atomic, concurrent
-    extractions all keep their tendons). Raises OSError when it cannot be
-    written (the original is then unchanged)."""
+def record_target(run: RecordedRun, record: bool | str | Path) -> Path | None:
+    """Where ``record`` asks the tendons to be logged (None: nowhere), checked before
+    any work: a ``.rrd`` path that can be written and, if it exists, is the run's
+    recording or a tendons file of this run."""
+    if record is False or record is None:
+        return None
+    if record is True:
+        return Path(run.path)
+    target = Path(record)
+    if target.suffix != ".rrd":
+        raise InputError(f"--record must name an .rrd file (got '{target}')")
+    check_writable(target, "tendons recording")
+    if target.exists() and not target.samefile(run.path):
+        owner = tendons_owner(target)
+        if owner is None or owner != run.meta.get("run_id"):
+            raise InputError(f"--record '{target}' exists and does not hold tendons of '{run.path}'; "
+                             f"name a new file or one an earlier --record of this run wrote")
+    return target
+
+
+def log_tendons(ex: Extraction, on_wait=None, target: str | Path | None = None) -> None:
+    """Add each extractor's tendons (rest and realizable) and summary under
+    ``/tendons/<extractor>`` at the stage they came from, to the run's recording or
+    to ``target``, a file of their own with the run's recording id (rerun shows
+    the two together; :data:`TENDONS_OF` names the run). An earlier extraction by
+    the same extractor at the same stage is replaced
+    (:func:`~tendon_taichi.io.recording.rewrite`: atomic, under a lock on the run's
+    recording, so concurrent extractions all keep their tendons). Raises OSError
+    when it cannot be written (the file is then unchanged)."""
     names = {r.name for r in ex.results if r.error is None}
+    target = Path(ex.run.path if target is None else target)
+    own_file = not (target.exists() and target.samefile(ex.run.path))
 
     def keep(ch) -> bool:
         parts = ch.entity_path.split("/")
+        if ch.entity_path == TENDONS_OF:
+            return False
         return not (len(parts) > 2 and parts[1] == "tendons" and parts[2] in names and chunk_at_stage(ch, ex.stage))
 
     def add(rr, rec) -> None:
+        if own_file:
+            rec.log(TENDONS_OF, rr.TextDocument(json.dumps({"recording": Path(ex.run.path).name,
+                                                            "run_id": ex.run.meta.get("run_id")}),
+                                                media_type="text/plain"), static=True)
         rec.set_time("stage", sequence=ex.stage)
         rec.set_time("iteration", sequence=int(ex.run.stages[ex.stage].summary.get("step", 0)))
         for r in ex.results:
@@ -237,7 +276,7 @@ def log_tendons(ex: Extraction, on_wait=None) -> None:
                 rec.log(f"/tendons/{r.name}/summary", rr.TextDocument(json.dumps(r.as_json()),
                                                                       media_type="text/plain"))
 
-    rewrite(ex.run.path, ex.run.meta.get("run_id"), keep, add, on_wait)
+    rewrite(target, ex.run.meta.get("run_id"), keep, add, on_wait, lock=ex.run.path)
 
 
 def log_layout(rr, rec, base: str, problem: Problem, tendons: list[Tendon], real: RealizableResult | None) -> None:

@@ -97,6 +97,8 @@ def _extraction_output(args, ex) -> int:
         print("\n".join(_metric_table(ex)))
         if "png" in out:
             print(f"png: {out['png']}")
+        if "record" in out:
+            print(f"tendons logged into: {out['record']}")
     for r in failed:
         print(f"{PROG}: error: {r.error}", file=sys.stderr)
     if ex.record_error is not None:
@@ -172,7 +174,7 @@ def cmd_extract(args) -> int:
 
     options = _parse_options(args.option, args.extractor)
     ex = extract(args.recording, [args.extractor], stage=args.stage, options=options, solver=args.solver,
-                 record=not args.no_record, consolidation=consolidation(args), on_wait=_waiting(args),
+                 record=record(args), consolidation=consolidation(args), on_wait=_waiting(args),
                  plugin_timeout=plugin_timeout(args), log=_progress(args, "extract"), **tendon_settings(args))
     r = ex.results[0]
     if r.error is not None:
@@ -193,10 +195,19 @@ def cmd_compare(args) -> int:
     from ..apps.extract import extract
 
     ex = extract(args.recording, args.extractors, stage=args.stage, options=_parse_options(args.option, None),
-                 solver=args.solver, record=not args.no_record, consolidation=consolidation(args),
+                 solver=args.solver, record=record(args), consolidation=consolidation(args),
                  on_wait=_waiting(args), plugin_timeout=plugin_timeout(args), log=_progress(args, "compare"),
                  **tendon_settings(args))
     return _extraction_output(args, ex)
+
+
+def record(args) -> bool | str:
+    """Where ``--record`` asks the tendons to be logged: False (not given: the
+    recording is only read), True (``--record`` alone: into the run's recording)
+    or a file of their own."""
+    if args.record is not None and args.no_record:
+        raise InputError("--record and --no-record contradict each other")
+    return False if args.record is None else True if args.record == "-" else args.record
 
 
 def plugin_timeout(args) -> float:
@@ -232,7 +243,10 @@ def add_commands(sub) -> None:
         s.add_argument("--option", action="append", default=[], metavar="K=V",
                        help="extractor option (compare: NAME.K=V); repeatable")
         s.add_argument("--solver", choices=("recorded",) + SOLVER_CHOICES, default="recorded")
-        s.add_argument("--no-record", action="store_true", help="do not log the tendons into the recording")
+        s.add_argument("--record", nargs="?", const="-", metavar="FILE.rrd",
+                       help="log the tendons: alone, into RUN.rrd (rewritten); with FILE.rrd, into a file of "
+                            "their own that rerun shows with the run (default: RUN.rrd is only read)")
+        s.add_argument("--no-record", action="store_true", help="log nothing (the default; kept for scripts)")
         add_consolidation_flags(s)
         add_tendon_flags(s)
         s.add_argument("--plugin-timeout", type=float, default=PLUGIN_TIMEOUT, metavar="S",

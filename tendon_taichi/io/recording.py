@@ -45,6 +45,9 @@ from ..objective.settings import OptimizeSettings, settings_dict, settings_from_
 APP_ID = "tendon_taichi"
 #: 2: with each stage's equilibria (``/stages/x``)
 FORMAT = 2
+#: static JSON of a file that holds only tendons logged from a run (``extract --record FILE``):
+#: ``recording`` (the run's file name) and ``run_id``
+TENDONS_OF = "/meta/tendons_of"
 
 
 class RecordingError(TendonError):
@@ -300,7 +303,7 @@ def read_recording(path: str | Path) -> RecordedRun:
         if fh.read(4) != b"RRF2":
             raise RecordingError(f"'{path}' is not a rerun recording (.rrd)")
     chunks, truncated = read_chunks(path)
-    meta, scene, arrays = None, None, {}
+    meta, scene, arrays, tendons_of = None, None, {}, None
     stages: dict[int, dict] = {}
     for ch in chunks:
         ent = ch.entity_path
@@ -309,6 +312,8 @@ def read_recording(path: str | Path) -> RecordedRun:
             meta = json.loads(_text(rb)[0])
         elif ent == "/meta/scene":
             scene = _text(rb)[0]
+        elif ent == TENDONS_OF:
+            tendons_of = json.loads(_text(rb)[0])
         elif ent.startswith("/problem/"):
             arrays[ent[len("/problem/"):]] = _tensors(rb)[0]
         elif ent in ("/stages/r", "/stages/ac", "/stages/tau", "/stages/x", "/stages/summary"):
@@ -316,6 +321,9 @@ def read_recording(path: str | Path) -> RecordedRun:
             values = _text(rb) if key == "summary" else _tensors(rb)
             for s, v in zip(_stage_values(rb), values):
                 stages.setdefault(s, {})[key] = json.loads(v) if key == "summary" else v
+    if meta is None and tendons_of is not None:
+        raise RecordingError(f"'{path}' holds only the tendons extracted from the run '{tendons_of['recording']}';"
+                             f" give that run's recording")
     if meta is None or meta.get("format") is None or scene is None:
         raise RecordingError(f"'{path}' is not a tendon-taichi recording (no run metadata)")
     missing = {"nodes", "triangles", "fixed", "fibers", "fiber_nodes_tri", "fiber_nodes_bary"} - set(arrays)
@@ -370,23 +378,37 @@ def completed_chunks(path: str | Path, stages: int):
     return keep
 
 
+def tendons_owner(path: str | Path) -> str | None:
+    """The run id a tendons file (:data:`TENDONS_OF`) names, or None when ``path`` is
+    not a readable tendons file."""
+    try:
+        chunks, _ = read_chunks(Path(path))
+    except (RecordingError, OSError):
+        return None
+    for ch in chunks:
+        if ch.entity_path == TENDONS_OF:
+            return json.loads(_text(ch.to_record_batch())[0]).get("run_id")
+    return None
+
+
 def chunk_at_stage(chunk, stage: int) -> bool:
     """Whether a chunk holds rows at ``stage`` of the stage timeline."""
     return "stage" in chunk.timeline_names and stage in chunk.to_record_batch().column("stage").to_pylist()
 
 
-def rewrite(path: str | Path, run_id: str | None, keep, add, on_wait=None) -> None:
+def rewrite(path: str | Path, run_id: str | None, keep, add, on_wait=None, lock: str | Path | None = None) -> None:
     """Rewrite a recording with the chunks ``keep(chunk)`` accepts, then what
-    ``add(rr, stream)`` logs. rerun files cannot be appended to, so the file is
-    rewritten, under a lock (``on_wait`` is called while another writer holds it)
-    and from what it holds then, so that concurrent writers all keep what they
+    ``add(rr, stream)`` logs (a file that does not exist yet is made). rerun files
+    cannot be appended to, so the file is rewritten, under a lock on the existing
+    file ``lock`` (default: the file itself; ``on_wait`` is called while another writer holds
+    it) and from what it holds then, so that concurrent writers all keep what they
     add; the new file replaces the old atomically. Raises OSError when it cannot
     be written (the original is then unchanged)."""
     import rerun as rr
 
     path = Path(path)
-    with locked(path, on_wait):
-        chunks, _ = read_chunks(path)
+    with locked(path if lock is None else lock, on_wait):
+        chunks = read_chunks(path)[0] if path.exists() else []
         rec = rr.RecordingStream(APP_ID, recording_id=run_id)
         memory = rec.memory_recording()
         rec.send_blueprint(default_blueprint(), make_active=False, make_default=True)  # as save() does

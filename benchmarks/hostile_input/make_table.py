@@ -1,0 +1,288 @@
+"""Try every case of the hostile-input issue against the installed tool and write
+what each now prints: ``benchmarks/hostile_input/README.md``.
+
+    python benchmarks/hostile_input/make_table.py [--out FILE]
+
+Each case runs the real command line in a scratch folder (removed at the end):
+malformed scenes, damaged and truncated recordings, two writers at once, kills,
+read-only folders, plugins that break the rules (the test suite's demo plugin,
+installed into the scratch folder). The table gives the exit status, the line
+the user reads, and what the case left on disk. About 5 minutes on 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import meshio
+import numpy as np
+
+from tendon_taichi.io.recording import read_recording
+from tendon_taichi.version import provenance
+
+ROOT = Path(__file__).resolve().parents[2]
+PLUGIN = ROOT / "tests" / "plugins" / "demo_extractor"
+QUICK = ("--no-consolidate", "--extractors")
+SQUARE = ("name = '{name}'\n[body]\noutline = {outline}\n{extra}[[fixed]]\nbox = {box}\n"
+          "[[targets]]\npoint = {point}\ngoal = {goal}\n")
+
+
+class Bench:
+    """The scratch folder, the environment (the demo plugin on PYTHONPATH) and the rows."""
+
+    def __init__(self, work: Path):
+        self.work = work
+        site = work / "site"
+        subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
+                        "--no-index", "--target", str(site), str(PLUGIN)], check=True)
+        self.env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
+        self.rows: list[tuple[str, str, str, str, str]] = []
+
+    def start(self, *args, cwd: Path | None = None) -> subprocess.Popen:
+        return subprocess.Popen([sys.executable, "-m", "tendon_taichi", *map(str, args)], cwd=cwd or self.work,
+                                env=self.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def cli(self, *args, cwd: Path | None = None) -> subprocess.CompletedProcess:
+        p = self.start(*args, cwd=cwd)
+        out, err = p.communicate(timeout=900)
+        return subprocess.CompletedProcess(p.args, p.returncode, out, err)
+
+    def folder(self, name: str) -> Path:
+        d = self.work / name
+        d.mkdir()
+        return d
+
+    def row(self, case: str, shown: str, r: subprocess.CompletedProcess | str, left: str, said: str | None = None):
+        """One table row: ``said`` or the error/warning lines of ``r`` (progress aside)."""
+        code = r if isinstance(r, str) else str(r.returncode)
+        if said is None:
+            lines = [ln for ln in r.stderr.splitlines() if ln.startswith("tendon-taichi:") or "Traceback" in ln]
+            said = " / ".join(lines) or "(no error line)"
+        self.rows.append((case, shown, code, said, left))
+        print(f"{case}: exit {code}: {said}", file=sys.stderr, flush=True)
+
+
+def files(d: Path) -> str:
+    """The files under ``d``, relative, or 'nothing'."""
+    got = sorted(str(p.relative_to(d)) for p in d.rglob("*") if p.is_file())
+    return ", ".join(f"`{g}`" for g in got) or "nothing"
+
+
+def logged_stages(path: Path, extractor: str = "strands") -> list[int]:
+    from rerun.chunk import RrdReader
+
+    return sorted({s for ch in RrdReader(path).stream() if ch.entity_path == f"/tendons/{extractor}/summary"
+                   for s in ch.to_record_batch().column("stage").to_pylist()})
+
+
+def scene(d: Path, name: str = "s", outline: str = "[[0, 0], [0.04, 0], [0.04, 0.04], [0, 0.04]]",
+          box: str = "[[-1, -0.001], [1, 0.001]]", point: str = "[0.02, 0.04]", goal: str = "[0.02, 0.05]",
+          extra: str = "") -> Path:
+    path = d / "s.toml"
+    path.write_text(SQUARE.format(name=name, outline=outline, box=box, point=point, goal=goal, extra=extra))
+    return path
+
+
+# ------------------------------------------------------------------ the cases, in the issue's order
+def concurrent_writers(b: Bench, run: Path):
+    for trial in range(3):
+        d = b.folder(f"c{trial}")
+        rec = Path(shutil.copyfile(run, d / "run.rrd"))
+        p = b.start("compare", rec, *QUICK, "strands", "--stage", 3, "--record", "--quiet")
+        time.sleep(0.1)
+        q = b.start("compare", rec, *QUICK, "strands", "--stage", 4, "--record", "--quiet")
+        codes = [x.wait(timeout=600) for x in (p, q)]
+        b.row(f"1. two `compare --record` 0.1 s apart (trial {trial + 1})",
+              "`compare R --stage 3 --record` and `--stage 4 --record`", " and ".join(map(str, codes)),
+              files(d), said=f"both finish; stages logged: {logged_stages(rec)}")
+
+
+def plugin_edits_state(b: Bench, run: Path):
+    r = b.cli("compare", run, *QUICK, "mutates", "strands", "--json")
+
+    out = {e["name"]: e for e in json.loads(r.stdout)["extractors"]}
+    alone = {e["name"]: e for e in json.loads(b.cli("compare", run, *QUICK, "strands", "--json").stdout)["extractors"]}
+    same = out["strands"]["metrics"]["count"] == alone["strands"]["metrics"]["count"] and \
+        out["strands"]["metrics"]["realizable_pose_error_rel"] == alone["strands"]["metrics"]["realizable_pose_error_rel"]
+    b.row("2. a plugin that writes into `state.tau`", "`compare R --extractors mutates strands`", r,
+          "nothing new", said=" / ".join(ln for ln in r.stderr.splitlines() if ln.startswith("tendon-taichi:"))
+          + f" (strands after it: {'the same as alone' if same else 'DIFFERENT from alone'})")
+
+
+def scene_name_paths(b: Bench):
+    d = b.folder("name")
+    (d / "a" / "b").mkdir(parents=True)
+    for name in ("../../escaped", "a/b"):
+        sub = d / "a" / "b"
+        scene(sub, name=name)
+        r = b.cli("simulate", "s.toml", "--uniform", 0.05, cwd=sub)
+        b.row(f"3. scene `name = \"{name}\"`", "`simulate s.toml --uniform 0.05`", r, files(d),
+              said="(no error line; the default output is one file under recordings/)" if r.returncode == 0
+              else None)
+        shutil.rmtree(sub / "recordings", ignore_errors=True)
+
+
+def waypoints_outside(b: Bench, run: Path):
+    r = b.cli("compare", run, *QUICK, "outside", "strands")
+    b.row("4. a plugin's waypoints 1 m outside the body", "`compare R --no-consolidate --extractors outside strands`",
+          r, "nothing new")
+
+
+def read_only_folder(b: Bench, run: Path):
+    d = b.folder("ro")
+    rec = Path(shutil.copyfile(run, d / "run.rrd"))
+    before = rec.read_bytes()
+    os.chmod(d, 0o555)
+    try:
+        as_user = [] if os.geteuid() != 0 else ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
+        for extra in ((), ("--record",)):
+            cmd = [*as_user, sys.executable, "-m", "tendon_taichi", "compare", str(rec), *QUICK, "strands",
+                   *extra]
+            r = subprocess.run(cmd, env=b.env, capture_output=True, text=True, cwd=b.work)
+            table = "the table printed" if "strands" in r.stdout else "NO table"
+            b.row(f"5. `compare` in a read-only folder{' with --record' if extra else ''}",
+                  f"`compare R{' --record' if extra else ''}`", r,
+                  ("recording unchanged" if rec.read_bytes() == before else "recording CHANGED") + f"; {files(d)}",
+                  said=(" / ".join(ln for ln in r.stderr.splitlines() if ln.startswith("tendon-taichi:"))
+                        or "(no error line)") + f"; {table}")
+    finally:
+        os.chmod(d, 0o755)
+
+
+def resume_and_truncated(b: Bench, run: Path):
+    d = b.folder("resume")
+    rec = Path(shutil.copyfile(run, d / "run.rrd"))
+    r = b.cli("optimize", "--resume", rec, "--resolution", 2, cwd=d)
+    b.row("6. `--resume` with another `--resolution`", "`optimize --resume R --resolution 2`", r, files(d))
+    torn = d / "torn.rrd"
+    data = run.read_bytes()
+    torn.write_bytes(data[: int(len(data) * 0.8)])
+    r = b.cli("extract", torn, "--extractor", "strands", "--no-consolidate")
+    b.row("6. `extract` on a truncated recording", "`extract torn.rrd --extractor strands`", r, "nothing new")
+
+
+def nan_plugin(b: Bench, run: Path):
+    r = b.cli("compare", run, *QUICK, "nan_waypoints", "strands")
+    b.row("7. a plugin returning NaN waypoints", "`compare R --extractors nan_waypoints strands`", r, "nothing new")
+
+
+def internal_errors(b: Bench, run: Path):
+    d = b.folder("tiny")
+    scene(d, outline="[[0, 0], [1e-6, 0], [1e-6, 1e-6], [0, 1e-6]]", box="[[-1, -1e-8], [1, 1e-8]]",
+          point="[5e-7, 1e-6]", goal="[5e-7, 1.1e-6]")
+    b.row("8. a 1 um body", "`simulate tiny.toml --uniform 0.05`", b.cli("simulate", "s.toml", "--uniform", 0.05, cwd=d),
+          files(d))
+    d = b.folder("damaged")
+    bad = d / "bad.rrd"
+    data = bytearray(run.read_bytes())
+    at = data.find(np.ascontiguousarray(read_recording(run).stages[2].ac[:4]).tobytes())
+    for k in range(8, 48):
+        data[at + k] ^= 0xFF
+    bad.write_bytes(bytes(data))
+    b.row("8. flipped bytes in `/stages/ac`", "`replay bad.rrd`", b.cli("replay", bad), files(d))
+    d = b.folder("unwritable")
+    (d / "afile").write_text("x")
+    r = b.cli("optimize", "t_shape", "--record", d / "afile" / "run.rrd", cwd=d)
+    b.row("8. an unwritable `--record` path", "`optimize t_shape --record afile/run.rrd`", r, files(d))
+    d = b.folder("vtu")
+    pts = np.array([[0, 0, 0], [0.04, 0, 0], [0, 0.04, 0.0]])
+    meshio.write(str(d / "ok.vtu"), meshio.Mesh(pts, [("triangle", np.array([[0, 1, 2]]))]))
+    raw = (d / "ok.vtu").read_bytes()
+    (d / "body.vtu").write_bytes(raw[: len(raw) // 2])
+    (d / "ok.vtu").unlink()
+    (d / "s.toml").write_text('name = "cut"\n[body]\nmesh = "body.vtu"\n[[fixed]]\nbox = [[-1, -1], [1, 0]]\n'
+                              "[[targets]]\npoint = [0.01, 0.01]\ngoal = [0.01, 0.02]\n")
+    b.row("8. a corrupt `.vtu` body", "`simulate s.toml --uniform 0.05` (half a VTU file)",
+          b.cli("simulate", "s.toml", "--uniform", 0.05, cwd=d), files(d))
+
+
+def too_large(b: Bench):
+    d = b.folder("large")
+    b.row("9. `simulate finger --resolution 99`", "`simulate finger --resolution 99 --uniform 0.05`",
+          b.cli("simulate", "finger", "--resolution", 99, "--uniform", 0.05, cwd=d), files(d))
+    scene(d, outline="[[0, 0], [1000, 0], [1000, 1000], [0, 1000]]", box="[[-1, -1], [1001, 1]]",
+          point="[500, 1000]", goal="[500, 1001]")
+    b.row("9. a 1 km outline with default sizes", "`simulate km.toml --uniform 0.05`",
+          b.cli("simulate", "s.toml", "--uniform", 0.05, cwd=d), files(d))
+
+
+def the_rest(b: Bench, run: Path):
+    d = b.folder("clamped")
+    scene(d, box="[[-1, -1], [1, 1]]")
+    b.row("10. every node clamped", "`optimize s.toml`", b.cli("optimize", "s.toml", cwd=d), files(d))
+    r = b.cli("compare", run, *QUICK, "sleeps", "strands", "--plugin-timeout", 2)
+    b.row("10. a plugin that sleeps", "`compare R --extractors sleeps strands --plugin-timeout 2`", r, "nothing new")
+    r = b.cli("extract", run, "--extractor", "strands", "--option", "max_turn=nan")
+    b.row("10. `--option max_turn=nan`", "`extract R --extractor strands --option max_turn=nan`", r, "nothing new")
+    r = b.cli("compare", run, "--friction", -1)
+    b.row("10. numbers in messages", "`compare R --friction -1`", r, "nothing new")
+    left = []
+    for i, at in enumerate((0.5, 1.5, 3.0, 4.5, 6.0)):
+        d = b.folder(f"kill{i}")
+        rec = Path(shutil.copyfile(run, d / "run.rrd"))
+        p = b.start("compare", rec, *QUICK, "strands", "--record", "--quiet")
+        time.sleep(at)
+        p.send_signal(signal.SIGKILL)
+        p.wait()
+        state = "original" if rec.read_bytes() == run.read_bytes() else \
+            "updated" if logged_stages(rec) else "DAMAGED"
+        left.append(f"{at:g} s: {state}, {files(d)}")
+    b.row("10. `compare --record` killed (SIGKILL)", "`compare R --record`, killed after 0.5-6 s", "-9",
+          "; ".join(left), said="(killed)")
+
+
+def made_at(p: dict) -> str:
+    dirty = " (with uncommitted changes)" if p["dirty"] else ""
+    return f"<sub>Made at commit `{(p['commit'] or 'unknown')[:7]}`{dirty} on {p['date']}, tendon-taichi {p['version']}.</sub>"
+
+
+def table(rows) -> str:
+    out = ["| case | command (R: a short t_shape recording) | exit | what it prints | left on disk |",
+           "|---|---|---|---|---|"]
+    for case, shown, code, said, left in rows:
+        out.append(f"| {case} | {shown} | {code} | {said.replace('|', '/')} | {left} |")
+    return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=str(Path(__file__).with_name("README.md")))
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        b = Bench(Path(tmp))
+        run = b.work / "run.rrd"
+        r = b.cli("optimize", "t_shape", "--stage-iterations", 25, "--k-min", 0.1, "--record", run, "--quiet")
+        assert r.returncode == 0, r.stderr
+        concurrent_writers(b, run)
+        plugin_edits_state(b, run)
+        scene_name_paths(b)
+        waypoints_outside(b, run)
+        read_only_folder(b, run)
+        resume_and_truncated(b, run)
+        nan_plugin(b, run)
+        internal_errors(b, run)
+        too_large(b)
+        the_rest(b, run)
+        text = table(b.rows).replace(str(b.work), "WORK")
+    Path(args.out).write_text(
+        "# Hostile input: what each case of the issue prints now\n\n"
+        "Every case of the hostile-input issue, run against the command line by\n"
+        "`python benchmarks/hostile_input/make_table.py` in a scratch folder (`WORK`).\n"
+        "Exit statuses: 0 done, 2 bad input or a file that could not be written, 4 an\n"
+        "extractor failed (the others' results are printed), -9 killed by the script.\n\n"
+        + text + "\n\n" + made_at(provenance()) + "\n")
+    print(args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
