@@ -191,6 +191,22 @@ def test_bad_recordings(tmp_path, cli, reference):
     empty.close()
     _one_line_error(cli("replay", tmp_path / "empty.rrd"), "no completed stage")
     _one_line_error(cli("optimize", "--resume", tmp_path / "empty.rrd"), "no completed stage to resume")
+    _one_line_error(cli("replay", tmp_path), "is a folder, not a file")
+
+
+def test_a_recording_that_cannot_be_read_is_one_line(reference, monkeypatch, capsys):
+    """As for a file the user may not read (which root, running these tests, could)."""
+    import tendon_taichi.io.recording as recording
+    from tendon_taichi.cli.main import main
+
+    def refuse(path, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(recording, "open", refuse, raising=False)
+    path, _ = reference
+    assert main(["replay", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"tendon-taichi: error: cannot read recording '{path}': Permission denied"]
 
 
 def test_damaged_stage_data_is_one_line(reference, tmp_path, cli):

@@ -142,6 +142,7 @@ def read_only_folder(b: Bench, run: Path):
     rec = Path(shutil.copyfile(run, d / "run.rrd"))
     before = rec.read_bytes()
     os.chmod(d, 0o555)
+    os.chmod(b.work, 0o755)  # the scratch folder is private: let the unprivileged user in
     try:
         as_user = [] if os.geteuid() != 0 else ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
         for extra in ((), ("--record",)):
@@ -156,6 +157,22 @@ def read_only_folder(b: Bench, run: Path):
                         or "(no error line)") + f"; {table}")
     finally:
         os.chmod(d, 0o755)
+        os.chmod(b.work, 0o700)
+
+
+def unreadable(b: Bench, run: Path):
+    d = b.folder("unreadable")
+    rec = Path(shutil.copyfile(run, d / "run.rrd"))
+    os.chmod(rec, 0o000)
+    as_user = [] if os.geteuid() != 0 else ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
+    os.chmod(b.work, 0o755)
+    try:
+        r = subprocess.run([*as_user, sys.executable, "-m", "tendon_taichi", "replay", str(rec)], env=b.env,
+                           capture_output=True, text=True, cwd=b.work)
+    finally:
+        os.chmod(b.work, 0o700)
+        os.chmod(rec, 0o644)
+    b.row("5. a recording the user may not read", "`replay R` (mode 000)", r, files(d))
 
 
 def resume_and_truncated(b: Bench, run: Path):
@@ -225,8 +242,12 @@ def the_rest(b: Bench, run: Path):
     b.row("10. `--option max_turn=nan`", "`extract R --extractor strands --option max_turn=nan`", r, "nothing new")
     r = b.cli("compare", run, "--friction", -1)
     b.row("10. numbers in messages", "`compare R --friction -1`", r, "nothing new")
+    d = b.folder("timed")
+    t0 = time.perf_counter()
+    b.cli("compare", Path(shutil.copyfile(run, d / "run.rrd")), *QUICK, "strands", "--record", "--quiet")
+    duration = time.perf_counter() - t0
     left = []
-    for i, at in enumerate((0.5, 1.5, 3.0, 4.5, 6.0)):
+    for i, at in enumerate(np.linspace(0.4, 1.0, 6) * duration):
         d = b.folder(f"kill{i}")
         rec = Path(shutil.copyfile(run, d / "run.rrd"))
         p = b.start("compare", rec, *QUICK, "strands", "--record", "--quiet")
@@ -235,8 +256,9 @@ def the_rest(b: Bench, run: Path):
         p.wait()
         state = "original" if rec.read_bytes() == run.read_bytes() else \
             "updated" if logged_stages(rec) else "DAMAGED"
-        left.append(f"{at:g} s: {state}, {files(d)}")
-    b.row("10. `compare --record` killed (SIGKILL)", "`compare R --record`, killed after 0.5-6 s", "-9",
+        left.append(f"{at:.1f} s: {state}, {files(d)}")
+    b.row("10. `compare --record` killed (SIGKILL)",
+          f"`compare R --record` (a whole run: {duration:.1f} s), killed after 40-100 % of that", "-9",
           "; ".join(left), said="(killed)")
 
 
@@ -267,6 +289,7 @@ def main(argv=None) -> int:
         scene_name_paths(b)
         waypoints_outside(b, run)
         read_only_folder(b, run)
+        unreadable(b, run)
         resume_and_truncated(b, run)
         nan_plugin(b, run)
         internal_errors(b, run)

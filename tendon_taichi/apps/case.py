@@ -27,13 +27,14 @@ STOP = (Interrupted,)
 
 def run_case(scene: Scene, level: int, out: str | Path, solver: str = "auto",
              extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
-             budget: float = BUDGET, png: bool = False) -> Design:
+             budget: float = BUDGET, png: bool = False, converge: bool = True) -> Design:
     """The design of ``scene`` at ``level`` into the folder ``out`` (``run.rrd``,
     ``run.npz``, ``design.json``, ``design.svg``; the pictures with ``png``), with
     ``extractors`` (default: every installed one), each followed by
-    ``consolidation`` (default settings, with ``budget``, if None)."""
+    ``consolidation`` (default settings, with ``budget``, if None); ``converge``
+    re-solves the front on the next finer mesh."""
     return design(scene, level, out, solver, budget, extractors=extractors,
-                  consolidation=consolidation or ConsolidationSettings(budget=budget), png=png)
+                  consolidation=consolidation or ConsolidationSettings(budget=budget), png=png, converge=converge)
 
 
 def warm_up() -> float:
@@ -45,7 +46,7 @@ def warm_up() -> float:
     t0 = time.perf_counter()
     scene = with_overrides(load_scene("t_shape"), {"stage_iterations": 3, "k_min": 0.5})
     with tempfile.TemporaryDirectory(prefix="tendon-taichi-warmup-") as tmp:
-        run_case(scene, 1, tmp, consolidation=ConsolidationSettings(tolerance=-1.0, refine=0))
+        run_case(scene, 1, tmp, consolidation=ConsolidationSettings(tolerance=-1.0, refine=0), converge=False)
     return time.perf_counter() - t0
 
 

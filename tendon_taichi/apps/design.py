@@ -21,12 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..body.problem import build_problem
 from ..body.scene import Scene
-from ..errors import InputError
-from ..extract.consolidation import Layout, finish
+from ..errors import ConvergenceError, InputError, TendonError
+from ..extract.consolidation import Layout
+from ..extract.front import Front, converged_error, pose_only_state, search_front
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.realizable import as_built_arrays
-from ..extract.settings import BUDGET, ConsolidationSettings
+from ..extract.settings import BEAM, BUDGET, ConsolidationSettings
 from ..files import check_writable, file_stem, write_json
 from ..io.drawing import write_svg
 from ..io.export import write_as_built
@@ -58,36 +60,32 @@ class Design:
     layout: Layout
 
 
-def front_entries(ex: Extraction, mu: float, kink_angle: float) -> list[tuple[dict, Layout]]:
-    """Every layout each extractor's consolidation passed through, with its figures."""
-    out = []
-    for r in ex.results:
-        if r.error is None and r.consolidation is not None:
-            out += [(lay.front_entry(mu, kink_angle), lay) for lay in r.consolidation.front.values()]
-    return out
+def front_rows(front: Front, fine: dict | None, mu: float, kink_angle: float) -> list[dict]:
+    """One entry per count: the front's layout with its figures; its
+    ``realizable_pose_error_rel`` is the one on the finer mesh where ``fine`` holds
+    it (``realizable_pose_error_rel_level`` the design level's)."""
+    rows = []
+    for k, lay in sorted(front.layouts.items()):
+        row = lay.front_entry(mu, kink_angle)
+        row["realizable_pose_error_rel_level"] = lay.error
+        if fine is not None and fine["results"].get(k) is not None:
+            row["realizable_pose_error_rel"] = fine["results"][k].pose_error_rel
+            row["converged_resolution"] = fine["resolution"]
+        rows.append(row)
+    return rows
 
 
-def recommend(entries: list[tuple[dict, Layout]], budget: float, max_tendons: int | None) -> tuple[dict, Layout]:
+def recommend(rows: list[dict], budget: float, max_tendons: int | None = None) -> dict:
     """The fewest tendons (at most ``max_tendons``) whose as-built error is within
     ``budget`` (fraction of L), the best worst capstan among them, then the
     shortest; when none is within it, the lowest as-built error."""
-    pool = [e for e in entries if max_tendons is None or e[0]["count"] <= max_tendons]
+    pool = [e for e in rows if max_tendons is None or e["count"] <= max_tendons]
     if not pool:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)")
-    within = [e for e in pool if e[0]["realizable_pose_error_rel"] <= budget]
+    within = [e for e in pool if e["realizable_pose_error_rel"] <= budget]
     if within:
-        return min(within, key=lambda e: (e[0]["count"], -e[0]["capstan_worst"], e[0]["total_length"]))
-    return min(pool, key=lambda e: (e[0]["realizable_pose_error_rel"], e[0]["count"]))
-
-
-def front_table(entries: list[tuple[dict, Layout]]) -> list[dict]:
-    """One entry per count: the lowest as-built error any extractor reached with it."""
-    best: dict[int, dict] = {}
-    for e, _ in entries:
-        k = e["count"]
-        if k not in best or e["realizable_pose_error_rel"] < best[k]["realizable_pose_error_rel"]:
-            best[k] = e
-    return [best[k] for k in sorted(best)]
+        return min(within, key=lambda e: (e["count"], -e["capstan_worst"], e["total_length"]))
+    return min(pool, key=lambda e: (e["realizable_pose_error_rel"], e["count"]))
 
 
 def tendon_rows(layout: Layout, mu: float) -> list[dict]:
@@ -110,11 +108,13 @@ def tendon_rows(layout: Layout, mu: float) -> list[dict]:
 def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: str = "auto",
            budget: float = BUDGET, max_tendons: int | None = None, extractors: list[str] | None = None,
            consolidation: ConsolidationSettings | None = None, progress: Progress | None = None,
-           plugin_timeout: float | None = None, png: bool = True) -> Design:
+           plugin_timeout: float | None = None, png: bool = True, beam: int = BEAM,
+           converge: bool = True) -> Design:
     """The main job (module docstring) on ``scene`` at ``level`` into the folder
     ``out`` (default :func:`default_out`); ``budget`` (fraction of L) both bounds
     consolidation (unless ``consolidation`` says otherwise) and picks the
-    recommendation; ``png`` draws design.png and front.png."""
+    recommendation; ``png`` draws design.png and front.png; ``beam`` and ``converge``
+    as for :func:`recommended`."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     out = Path(out) if out is not None else default_out(scene, level)
@@ -123,7 +123,7 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     progress.message(f"design: optimizing {scene.name} at level {level}")
     run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
     ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
-                                      plugin_timeout)
+                                      plugin_timeout, beam, converge)
     summary["timing"]["optimize_s"] = run.summary["time_s"]
     summary["files"] = _write(out, ex, layout, summary, png)
     summary["time_s"] = time.perf_counter() - t0
@@ -133,12 +133,13 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
 
 def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int | None = None,
                 extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
-                progress: Progress | None = None,
-                plugin_timeout: float | None = None) -> tuple[Extraction, Layout, dict]:
-    """Every extractor on a recorded run's last stage, consolidated and routed, and
-    the layout recommended (:func:`recommend`), its routes optimized: the
-    extraction, the layout and the summary ``design.json`` holds (no file is
-    written)."""
+                progress: Progress | None = None, plugin_timeout: float | None = None, beam: int = BEAM,
+                converge: bool = True) -> tuple[Extraction, Layout, dict]:
+    """Every extractor on a recorded run's last stage, consolidated and routed, the
+    count/error front searched from all their routes (:func:`search_front`), each
+    front entry solved again on the next finer mesh (``converge``), and the layout
+    recommended (:func:`recommend`): the extraction, the layout and the summary
+    ``design.json`` holds (no file is written)."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     cons = consolidation or ConsolidationSettings(budget=budget)
@@ -148,30 +149,60 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
         progress.message(f"design: {text}")
 
     ex = extract(recording, extractors, solver="recorded", record=False, consolidation=cons, log=log, **kwargs)
-    problem = ex.problem
-    ms = MetricSettings(mu=problem.scene.tendons.friction)
-    entries = front_entries(ex, ms.mu, ms.kink_angle)
-    if not entries:
+    extract_s = time.perf_counter() - t0
+    problem, solver = ex.problem, ex.run.meta.get("solver", "auto")
+    done = [r.consolidation for r in ex.results if r.error is None and r.consolidation is not None]
+    if not done:
         raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
-    _, layout = recommend(entries, budget, max_tendons)
-    finish_s = 0.0
-    if not layout.optimized:  # a layout consolidation passed through: its routes are optimized now
-        log(f"optimizing the recommended {layout.count} route(s)")
-        t1 = time.perf_counter()
-        layout = finish(problem, layout, ex.state, ex.run.settings, cons, ex.run.meta.get("solver", "auto"), log)
-        finish_s = time.perf_counter() - t1
-    summary = _summary(ex, layout, entries, budget, max_tendons, ms, time.perf_counter() - t0)
-    summary["timing"]["route_s"] += finish_s
+    ms = MetricSettings(mu=problem.scene.tendons.friction)
+    front = search_front(problem, ex.state, ex.run.settings, done, cons, solver, max_tendons, beam, log)
+    fine = finer_mesh_errors(ex, front, solver, log) if converge else None
+    rows = front_rows(front, fine, ms.mu, ms.kink_angle)
+    chosen = recommend(rows, budget, max_tendons)
+    layout = front.layouts[chosen["count"]]
+    summary = _summary(ex, layout, chosen, rows, budget, max_tendons, ms)
+    summary["search"] = {**front.as_json(), "beam": beam,
+                         "converged_resolution": None if fine is None else fine["resolution"],
+                         **({"converge_error": fine["error"]} if fine and fine.get("error") else {})}
+    summary["timing"].update(extract_s=extract_s, front_s=front.time_s,
+                             converge_s=None if fine is None else fine["time_s"],
+                             route_s=summary["timing"]["route_s"] + front.route_s)
     return ex, layout, summary
 
 
-def _summary(ex: Extraction, layout: Layout, entries, budget: float, max_tendons, ms: MetricSettings,
-             extract_s: float) -> dict:
+def finer_mesh_errors(ex: Extraction, front: Front, solver: str, log) -> dict:
+    """The front's layouts solved on the next finer mesh (level + 1): ``resolution``,
+    ``results`` (per count its as-built robot there, None where it could not be
+    solved), ``time_s``, and ``error`` when that mesh could not be built (too large
+    for this machine, or its scene file is gone)."""
+    t0 = time.perf_counter()
+    level = ex.problem.level + 1
+    out = {"resolution": level, "results": {}, "time_s": 0.0}
+    log(f"re-solving the front on the level-{level} mesh")
+    try:
+        fine = build_problem(ex.problem.scene, level)
+    except TendonError as exc:
+        log(f"the level-{level} mesh was not built ({exc}); the front's errors are at level {level - 1}")
+        return {**out, "error": str(exc), "time_s": time.perf_counter() - t0}
+    state = pose_only_state(fine)
+    for k, lay in front.layouts.items():
+        try:
+            out["results"][k] = converged_error(fine, lay, state, ex.run.settings, solver)
+        except ConvergenceError:
+            out["results"][k] = None
+    out["time_s"] = time.perf_counter() - t0
+    return out
+
+
+def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], budget: float, max_tendons,
+             ms: MetricSettings) -> dict:
     problem, run = ex.problem, ex.run
     tendons = layout.tendons()
     real = layout.realizable
     metrics = tendon_metrics(problem, ex.state, tendons, ms)
-    metrics.update(realizable_pose_error=real.pose_error, realizable_pose_error_rel=real.pose_error_rel,
+    metrics.update(realizable_pose_error=chosen["realizable_pose_error_rel"] * problem.size,
+                   realizable_pose_error_rel=chosen["realizable_pose_error_rel"],
+                   realizable_pose_error_rel_level=real.pose_error_rel,
                    realizable_pose_error_rel_frictionless=frictionless_error(
                        problem, tendons, ex.state, run.settings, run.meta.get("solver", "auto"), real),
                    idealized_pose_error_rel=ex.idealized_pose_error / problem.size)
@@ -183,12 +214,12 @@ def _summary(ex: Extraction, layout: Layout, entries, budget: float, max_tendons
             "friction": ts.friction, "clearance": ts.clearance, "budget": budget, "max_tendons": max_tendons,
             "recommended": {"count": layout.count, "source": layout.source, "tendons": tendon_rows(layout, ms.mu),
                             "metrics": metrics},
-            "front": front_table(entries),
+            "front": rows,
             "extractors": [{"name": r.name, "count": r.metrics.get("count"),
                             "realizable_pose_error_rel": r.metrics.get("realizable_pose_error_rel"),
                             "capstan_worst": r.metrics.get("capstan_worst"), "time_s": r.time_s,
                             **({"error": r.error} if r.error else {})} for r in ex.results],
-            "timing": {"optimize_s": None, "extract_s": extract_s, "route_s": sum(c.route_s for c in done),
+            "timing": {"optimize_s": None, "extract_s": None, "route_s": sum(c.route_s for c in done),
                        "route_evaluations": sum(c.route_evaluations for c in done)},
             "provenance": provenance()}
 

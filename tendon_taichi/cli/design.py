@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..extract.checks import PLUGIN_TIMEOUT
-from ..extract.settings import BUDGET
+from ..extract.settings import BEAM, BUDGET
 from .common import PROG, SOLVER_CHOICES, add_json, json_out
 from .runs import add_optimize_flags, optimize_overrides
 from .tendons import add_consolidation_flags, add_tendon_flags, consolidation, plugin_timeout, tendon_settings
@@ -20,6 +20,8 @@ def _checked(args) -> tuple[float, int | None]:
         raise InputError(f"--budget must be a fraction of L in (0, 1) (got {args.budget:g})")
     if args.max_tendons is not None and args.max_tendons < 1:
         raise InputError(f"--max-tendons must be an integer >= 1 (got {args.max_tendons})")
+    if args.beam < 1:
+        raise InputError(f"--beam must be an integer >= 1 (got {args.beam})")
     return args.budget, args.max_tendons
 
 
@@ -27,28 +29,26 @@ def table(summary: dict) -> list[str]:
     """The short table ``design`` prints: the front, the recommended tendons, the files."""
     rec = summary["recommended"]
     m = rec["metrics"]
-    out = [f"{summary['scene']} level {summary['resolution']} (L = {100 * summary['body_size']:.2f} cm, friction "
+    fine = summary.get("search", {}).get("converged_resolution")
+    level = summary["resolution"]
+    out = [f"{summary['scene']} level {level} (L = {100 * summary['body_size']:.2f} cm, friction "
            f"{summary['friction']:g}, clearance {summary['clearance']:g} L, budget {100 * summary['budget']:g}% of L)",
-           "the front (per tendon count, the lowest as-built error found; * the recommended design):",
-           f"{'tendons':>7} {'as built':>9} {'capstan':>7} {'kinks':>5} {'length':>8}  from"]
-    chosen = {"count": rec["count"], "realizable_pose_error_rel": m["realizable_pose_error_rel"],
-              "capstan_worst": m["capstan_worst"], "kinks": m["kinks"], "total_length": m["total_length"],
-              "source": rec["source"]}
+           "the front (per tendon count, the best layout found; * the recommended design):",
+           f"{'tendons':>7} {'as built':>9} {f'level {level}':>9} {'capstan':>7} {'kinks':>5} {'length':>8}  from"]
+    if fine is not None:
+        out[1] = out[1][:-2] + f"; as built: re-solved at level {fine}):"
 
     def line(row: dict, mark: str) -> str:
         return (f"{row['count']:>5}{mark} {100 * row['realizable_pose_error_rel']:>8.2f}% "
+                f"{100 * row['realizable_pose_error_rel_level']:>8.2f}% "
                 f"{row['capstan_worst']:>7.3f} {row['kinks']:>5} {100 * row['total_length']:>5.1f} cm  "
                 f"{row['source']}")
 
     for e in summary["front"]:
-        if e["count"] != rec["count"]:
-            out.append(line(e, "  "))
-            continue
-        if line(e, "") != line(chosen, ""):  # the front's entry, then the recommended design made of it
-            out.append(line(e, "  "))
-        out.append(line(chosen, " *"))
+        out.append(line(e, " *" if e["count"] == rec["count"] else "  "))
     out.append(f"recommended: {rec['count']} tendon(s) (from {rec['source']}), as built "
-               f"{100 * m['realizable_pose_error_rel']:.2f}% of L (frictionless "
+               f"{100 * m['realizable_pose_error_rel']:.2f}% of L (level {level}: "
+               f"{100 * m['realizable_pose_error_rel_level']:.2f}%, frictionless "
                f"{100 * m['realizable_pose_error_rel_frictionless']:.2f}%), worst capstan {m['capstan_worst']:.3f}, "
                f"{m['kinks']} kinks, clearance {1e3 * (m['clearance_min'] or 0):.1f} mm")
     for i, t in enumerate(rec["tendons"]):
@@ -72,7 +72,8 @@ def cmd_design(args) -> int:
         raise InputError(f"--resolution must be >= 1 (got {args.resolution})")
     scene = with_overrides(load_scene(args.scene), optimize_overrides(args)).with_tendons(**tendons)
     result = design(scene, args.resolution, args.out, args.solver, budget, max_tendons, args.extractors, cons,
-                    Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png)
+                    Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png, beam=args.beam,
+                    converge=not args.no_converge)
     summary = result.summary
     json_out(args, summary)
     if args.json != "-":
@@ -93,6 +94,10 @@ def add_commands(sub) -> None:
                         "design is the fewest tendons within it")
     s.add_argument("--max-tendons", type=int, default=None, metavar="K",
                    help="recommend at most K tendons")
+    s.add_argument("--beam", type=int, default=BEAM, metavar="B",
+                   help=f"layouts kept per tendon count by the front's beam search (default {BEAM})")
+    s.add_argument("--no-converge", action="store_true",
+                   help="report the front's errors on the design's mesh, not re-solved on the next finer one")
     s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")
     s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto", help="linear solver (default auto)")
     add_tendon_flags(s)

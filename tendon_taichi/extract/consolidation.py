@@ -306,13 +306,14 @@ class _Search:
                 now, flipped = lay, flipped + [i]
         return now, flipped
 
-    def finish(self, now: Layout) -> tuple[Layout, list[Step]]:
-        """The layout oriented and its routes optimized, and the steps that took."""
+    def finish(self, now: Layout, rounds: int | None = None) -> tuple[Layout, list[Step]]:
+        """The layout oriented and its routes optimized (at most ``rounds``, default
+        ``refine``, rounds), and the steps that took."""
         steps = []
         now, flipped = self.orient(now)
         if flipped:
             steps.append(Step("orient", tuple(flipped), now.count, now.error))
-        done = self.optimize(now)
+        done = self.optimize(now, rounds)
         if done is not now:
             steps.append(Step("route", tuple(range(done.count)), done.count, done.error))
         return replace(done, optimized=True), steps

@@ -13,6 +13,8 @@ GAP = 0.2
 REFINE = 2
 #: drop and join candidates solved in full per round (the best screened; 0: all, unscreened)
 SCREEN = 4
+#: layouts kept per tendon count by the count/error front's beam search
+BEAM = 3
 
 
 @dataclass(frozen=True)

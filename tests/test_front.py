@@ -1,0 +1,83 @@
+"""The count/error front on goals made by two straight planted tendons (frictionless,
+see test_consolidation): one tendon is not enough and two are, so the front
+drops at k = 2 and the recommendation is 2; it is monotone, never worse than
+greedy consolidation at any count, pools the extractors' routes, and its
+layouts re-solved on a finer mesh stay close."""
+
+import numpy as np
+import pytest
+from test_consolidation import _state, _tendons, straight  # noqa: F401  (the fixture)
+
+from tendon_taichi.apps.design import front_rows, recommend
+from tendon_taichi.extract.consolidation import consolidate
+from tendon_taichi.extract.front import converged_error, distinct_routes, pose_only_state, same_route, search_front
+from tendon_taichi.extract.settings import ConsolidationSettings
+
+OPTIONS = ConsolidationSettings(tolerance=1e-3, gap=0.1, budget=0.005, refine=0)
+
+
+@pytest.fixture(scope="module")
+def searched(straight):  # noqa: F811
+    """Two 'extractors': one found both planted tendons and a useless third, the
+    other the stem tendon and the arm tendon in two pieces; each consolidated
+    greedily, then the front searched from both."""
+    p, paths, eq = straight
+    st = _state(p, eq, paths)
+    mid = p.fibers.nodes[p.fibers.edges].mean(axis=1)
+    extra = [int(np.argmin(np.linalg.norm(mid - q, axis=1))) for q in ([0.004, 0.03], [0.004, 0.035])]
+    arm = list(paths[0])
+    found = {"a": _tendons(p, [paths[0], paths[1], extra], st),
+             "b": _tendons(p, [paths[1], arm[:3], arm[5:]], st)}
+    greedy = [consolidate(p, t, st, p.scene.optimize, OPTIONS, "direct", source=name) for name, t in found.items()]
+    front = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
+    return p, st, greedy, front
+
+
+def test_one_tendon_is_not_enough_and_two_are(searched):
+    p, _, _, front = searched
+    assert sorted(front.layouts) == [1, 2, 3]
+    assert front.layouts[1].error > 0.005  # neither planted tendon alone makes the pose
+    assert front.layouts[2].error < 1e-3  # both do
+    rows = front_rows(front, None, 0.0, 30.0)
+    assert recommend(rows, 0.005)["count"] == 2
+    assert recommend(rows, 1.01 * front.layouts[1].error)["count"] == 1  # a looser budget buys one
+
+
+def test_the_front_is_monotone(searched):
+    _, _, _, front = searched
+    errors = [front.layouts[k].error for k in sorted(front.layouts)]
+    assert all(b <= a + 1e-6 for a, b in zip(errors, errors[1:])), errors  # the soft IK's precision, x L
+
+
+def test_never_worse_than_greedy_at_any_count(searched):
+    _, _, greedy, front = searched
+    for c in greedy:
+        for k, lay in c.front.items():
+            if k in front.layouts:
+                assert front.layouts[k].cost <= lay.cost * (1 + 1e-9), (k, c.layout.source)
+
+
+def test_the_pool_holds_each_route_once(searched):
+    p, _, greedy, front = searched
+    routes = [r for c in greedy for lay in c.front.values() for r in lay.routes]
+    pool = distinct_routes(routes, p.size)
+    assert front.pool == len(pool) < len(routes)
+    assert all(not same_route(a, b, p.size) for i, a in enumerate(pool) for b in pool[i + 1:])
+    assert same_route(pool[0], pool[0].reversed(), p.size)  # the same curve either way round
+    assert front.evaluations > 0
+
+
+def test_a_finer_mesh_gives_close_errors(searched):
+    """The two-tendon layout's routes, re-solved on the level-2 mesh, still make the
+    pose (the discretization moves the error by little)."""
+    from dataclasses import replace
+
+    from tendon_taichi import build_problem
+
+    p, _, _, front = searched
+    fine = replace(build_problem(p.scene, 2), target_goal=p.target_goal)  # the planted goals, as on level 1
+    assert fine.mesh.n_nodes > 1.5 * p.mesh.n_nodes
+    real = converged_error(fine, front.layouts[2], pose_only_state(fine), p.scene.optimize, "direct")
+    assert real.pose_error_rel < 0.005
+    one = converged_error(fine, front.layouts[1], pose_only_state(fine), p.scene.optimize, "direct")
+    assert one.pose_error_rel > 0.005
