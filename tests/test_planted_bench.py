@@ -127,8 +127,34 @@ def test_planted_bench_command_on_one_case(tmp_path):
     (["/no/such/suite"], "not a folder"),
     ([str(SUITE), "--cases", "nope"], "no such case"),
     ([str(SUITE), "--sparsity", "-1"], "sparsity"),
+    ([str(SUITE), "--levels", "1", "0"], "--resolution and --levels must be >= 1"),
+    ([str(SUITE), "--levels", "1", "--resolution", "2"], "not allowed with argument"),
 ])
 def test_planted_bench_bad_input_is_one_line(tmp_path, args, message):
     r = _cli("planted-bench", *args, "--out", tmp_path / "pb")
     assert r.returncode == 2 and message in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert not (tmp_path / "pb").exists()
+
+
+def test_levels_compare_the_recommended_count_and_the_fronts():
+    from tendon_taichi.planted.levels import compare_levels, fronts_figure, table
+
+    def case(name, count, errors):
+        front = [{"count": k + 1, "realizable_pose_error_rel": e, "source": "strands"} for k, e in enumerate(errors)]
+        return {"case": name, "planted_count": 2, "count": count, "front": front}
+
+    runs = {lv: {"cases": [case("a", 2, [0.02, 0.001]), case("b", 2 if lv < 3 else 1, [0.004 * lv, 0.001]),
+                           {"case": "c", "error": "failed"} if lv == 2 else case("c", 1, [0.001])],
+                 "totals": {"passed": lv}} for lv in (1, 2, 3)}
+    res = compare_levels(runs)
+    assert res["levels"] == [1, 2, 3] and [c["case"] for c in res["cases"]] == ["a", "b"]  # c failed at level 2
+    a, b = res["cases"]
+    assert a["same_count"] and a["counts"] == {"1": 2, "2": 2, "3": 2}
+    assert not b["same_count"] and b["counts"]["3"] == 1 and res["same_count"] == 1
+    assert b["fronts"]["2"][0]["realizable_pose_error_rel"] == 0.008 and res["totals"]["3"] == {"passed": 3}
+    text = table(res)
+    assert text[-1] == "the same recommended count at every level in 1 of 2 cases"
+    assert text[2].split()[-1] == "no" and text[1].split()[1:] == ["2", "2", "2", "2", "yes"]
+    fig = fronts_figure(res)
+    assert len(fig.axes[0].get_lines()) == 3 + 1  # a line per level and the planted count
+    assert fig.axes[1].get_title() == "b (count moves)"

@@ -82,9 +82,22 @@ def cmd_planted_bench(args) -> int:
 
     overrides = optimize_overrides(args)
     workers, scheduler = cluster_args(args)
-    result = run_suite(args.suite, args.resolution, args.out, overrides, args.extractors, args.solver,
-                       args.cases, workers=workers, scheduler=scheduler, consolidation=consolidation(args),
-                       tendons=tendon_settings(args))
+    if any(lv < 1 for lv in args.levels or [args.resolution]):
+        raise InputError("--resolution and --levels must be >= 1")
+    kwargs = dict(overrides=overrides, extractors=args.extractors, solver=args.solver, cases=args.cases,
+                  workers=workers, scheduler=scheduler, consolidation=consolidation(args),
+                  tendons=tendon_settings(args))
+    if args.levels:
+        from ..planted.levels import run_levels
+        from ..planted.levels import table as levels_table
+
+        result = run_levels(args.suite, sorted(set(args.levels)), args.out, **kwargs)
+        json_out(args, result)
+        if args.json != "-":
+            print("\n".join(levels_table(result)))
+            print(f"outputs in {args.out}/ (levels.json, fronts.png, level<N>/)")
+        return 0
+    result = run_suite(args.suite, args.resolution, args.out, **kwargs)
     json_out(args, result)
     if args.json != "-":
         print("\n".join(table(result)))
@@ -161,7 +174,11 @@ def add_commands(sub) -> None:
                                              "against what was planted")
     s.add_argument("suite", metavar="DIR", nargs="?", default="benchmarks/planted",
                    help="folder of planted cases, NAME.toml + NAME.json (default benchmarks/planted)")
-    s.add_argument("--resolution", type=int, default=2, metavar="N", help="resolution level (default 2)")
+    level = s.add_mutually_exclusive_group()
+    level.add_argument("--resolution", type=int, default=2, metavar="N", help="resolution level (default 2)")
+    level.add_argument("--levels", type=int, nargs="+", metavar="N",
+                       help="run at each of these levels (into DIR/level<N>/) and compare: per case the front "
+                            "of every level and whether the recommended count is the same")
     s.add_argument("--out", default="recordings/planted", metavar="DIR")
     s.add_argument("--cases", nargs="+", metavar="NAME", help="run only these cases")
     s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")
