@@ -128,7 +128,7 @@ def test_planted_bench_command_on_one_case(tmp_path):
     ([str(SUITE), "--cases", "nope"], "no such case"),
     ([str(SUITE), "--sparsity", "-1"], "sparsity"),
     ([str(SUITE), "--levels", "1", "0"], "--resolution and --levels must be >= 1"),
-    ([str(SUITE), "--levels", "1", "--resolution", "2"], "not allowed with argument"),
+    ([str(SUITE), "--levels", "1", "--resolution", "3"], "not allowed with argument"),
 ])
 def test_planted_bench_bad_input_is_one_line(tmp_path, args, message):
     r = _cli("planted-bench", *args, "--out", tmp_path / "pb")
@@ -156,5 +156,5 @@ def test_levels_compare_the_recommended_count_and_the_fronts():
     assert text[-1] == "the same recommended count at every level in 1 of 2 cases"
     assert text[2].split()[-1] == "no" and text[1].split()[1:] == ["2", "2", "2", "2", "yes"]
     fig = fronts_figure(res)
-    assert len(fig.axes[0].get_lines()) == 3 + 1  # a line per level and the planted count
+    assert len(fig.axes[0].get_lines()) == 3 + 2  # a line per level, the planted count and the budget
     assert fig.axes[1].get_title() == "b (count moves)"

@@ -122,6 +122,25 @@ def test_recording_holds_the_layout(reference):
         assert e in entities, e
 
 
+def test_geometry_is_logged_log_spaced_and_scalars_every_iteration(reference):
+    """By default each stage's geometry is at its iterations 1, 2, 4, 8, ... and its
+    end; the scalars are at every iteration."""
+    from rerun.chunk import RrdReader
+
+    path, _ = reference
+    steps: dict[str, set] = {"/world/mesh": set(), "/world/fibers": set(), "/metrics/objective/pose": set()}
+    for ch in RrdReader(path).stream():
+        if ch.entity_path in steps:
+            steps[ch.entity_path].update(ch.to_record_batch().column("iteration").to_pylist())
+    ends = [int(st.summary["step"]) for st in read_recording(path).stages]
+    expect = set()
+    for before, end in zip([0] + ends, ends):
+        expect |= {before + 2 ** j for j in range(12) if before + 2 ** j <= end} | {end}
+    assert steps["/world/mesh"] == steps["/world/fibers"] == expect
+    assert steps["/metrics/objective/pose"] == set(range(1, ends[-1] + 1))
+    assert len(expect) < ends[-1] / 2  # far fewer frames than iterations
+
+
 def _start(args, cwd):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     # a shell's background job inherits SIGINT ignored; the child must see Ctrl-C as a user would

@@ -23,9 +23,9 @@ import numpy as np
 
 from ..body.problem import build_problem
 from ..body.scene import Scene
-from ..errors import ConvergenceError, InputError, TendonError
+from ..errors import InputError, TendonError
 from ..extract.consolidation import Layout
-from ..extract.front import Front, converged_error, pose_only_state, search_front
+from ..extract.front import Front, converge_front, search_front
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.realizable import as_built_arrays
 from ..extract.settings import BEAM, BUDGET, ConsolidationSettings
@@ -156,7 +156,7 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
         raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
     ms = MetricSettings(mu=problem.scene.tendons.friction)
     front = search_front(problem, ex.state, ex.run.settings, done, cons, solver, max_tendons, beam, log)
-    fine = finer_mesh_errors(ex, front, solver, log) if converge else None
+    fine = finer_mesh_errors(ex, front, cons, solver, log) if converge else None
     rows = front_rows(front, fine, ms.mu, ms.kink_angle)
     chosen = recommend(rows, budget, max_tendons)
     layout = front.layouts[chosen["count"]]
@@ -170,11 +170,12 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
     return ex, layout, summary
 
 
-def finer_mesh_errors(ex: Extraction, front: Front, solver: str, log) -> dict:
-    """The front's layouts solved on the next finer mesh (level + 1): ``resolution``,
-    ``results`` (per count its as-built robot there, None where it could not be
-    solved), ``time_s``, and ``error`` when that mesh could not be built (too large
-    for this machine, or its scene file is gone)."""
+def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings, solver: str, log) -> dict:
+    """The front's layouts solved on the next finer mesh (level + 1), kept monotone
+    there (:func:`converge_front`): ``resolution``, ``results`` (per count its
+    as-built robot there, None where it could not be solved), ``time_s``, and
+    ``error`` when that mesh could not be built (too large for this machine, or its
+    scene file is gone)."""
     t0 = time.perf_counter()
     level = ex.problem.level + 1
     out = {"resolution": level, "results": {}, "time_s": 0.0}
@@ -184,12 +185,7 @@ def finer_mesh_errors(ex: Extraction, front: Front, solver: str, log) -> dict:
     except TendonError as exc:
         log(f"the level-{level} mesh was not built ({exc}); the front's errors are at level {level - 1}")
         return {**out, "error": str(exc), "time_s": time.perf_counter() - t0}
-    state = pose_only_state(fine)
-    for k, lay in front.layouts.items():
-        try:
-            out["results"][k] = converged_error(fine, lay, state, ex.run.settings, solver)
-        except ConvergenceError:
-            out["results"][k] = None
+    out["results"] = converge_front(front, ex.problem, ex.state, fine, ex.run.settings, cons, solver, log)
     out["time_s"] = time.perf_counter() - t0
     return out
 

@@ -87,7 +87,7 @@ def _complete(ik: SoftIK, st: StageResult) -> None:
 
 
 def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
-             record: str | Path | None = None, export: str | Path | None = None, log_every: int = 1,
+             record: str | Path | None = None, export: str | Path | None = None, log_every: int = 0,
              progress: Progress | None = None, resume: str | Path | None = None,
              png: str | Path | None = None) -> RunResult:
     """Run the regularized soft IK on ``scene`` at resolution ``level`` (default

@@ -132,8 +132,8 @@ def cmd_optimize(args) -> int:
         if args.scene is None:
             raise InputError("a SCENE is required (or --resume RUN.rrd)")
         scene = with_overrides(load_scene(args.scene), overrides)
-    if args.log_every < 1:
-        raise InputError(f"--log-every must be >= 1 (got {args.log_every})")
+    if args.log_every < 0:
+        raise InputError(f"--log-every must be >= 0 (got {args.log_every})")
     try:
         result = optimize(scene, args.resolution, args.solver, record=args.record, export=args.export,
                           log_every=args.log_every, progress=Progress(enabled=not args.quiet),
@@ -227,8 +227,9 @@ def add_commands(sub) -> None:
                         "default the same file)")
     s.add_argument("--png", nargs="?", const="-", metavar="FILE",
                    help="picture of the stage-0 and final tension patterns (default: beside the recording)")
-    s.add_argument("--log-every", type=int, default=1, metavar="N",
-                   help="record the geometry every N-th iteration (scalars every iteration)")
+    s.add_argument("--log-every", type=int, default=0, metavar="N",
+                   help="record the geometry every N-th iteration of a stage (default 0: iterations 1, 2, 4, "
+                        "8, ...); scalars every iteration, every stage's end always")
     s.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_optimize_flags(s)
     add_json(s)

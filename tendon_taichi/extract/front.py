@@ -12,17 +12,22 @@ tendons together:
 * **beam search**: from the most tendons down, the ``beam`` best distinct layouts
   of each count (by effective error, the as-built error with the pull lost to
   friction priced in - what consolidation ranks by) are each reduced by every
-  drop and smooth join (screened by one Gauss-Newton step, the best solved in
-  full), and the results compete with the seeds of the count below;
-* **finish**: the best layout of each count is oriented and its routes
-  optimized (control points, ends and contractions): ``refine`` rounds up to
-  the first count within the budget, one round above it;
+  drop and smooth join (ends up to ``JOIN_GAP`` x L apart; screened by one
+  Gauss-Newton step, the best solved in full), and the results compete with
+  the seeds of the count below;
+* **finish**: up to the first count within the budget, every layout the beam
+  kept of that count is oriented and its routes optimized (control points,
+  ends and contractions; ``refine`` rounds), and the least costly is the
+  count's; above it, only the best, one round;
 * **monotone**: where a count's layout has a larger as-built error than the one
-  below (by more than the soft IK's precision, ``PRECISION``), the smaller layout with one more pooled route added is solved and kept
-  when it does better - a tendon more never makes the best layout found worse.
+  below (by more than the soft IK's precision, ``PRECISION``), the smaller
+  layout with one more pooled route added is solved and kept when it does
+  better - a tendon more never makes the best layout found worse.
 
 Because a greedy layout of each count is among the seeds, the front is never
 worse than greedy consolidation at any count (in effective error).
+:func:`converge_front` then solves each layout on a finer mesh, where the same
+monotone repair applies to the errors reported.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from typing import Callable
 import numpy as np
 
 from ..body.problem import Problem
+from ..errors import ConvergenceError
 from ..objective.settings import OptimizeSettings
 from .consolidation import Candidate, Consolidation, Layout, _Search, route_settings
 from .protocol import IdealizedState
@@ -41,6 +47,10 @@ from .realizable import RealizableResult, solve_realizable_poses
 from .routes import Route, resample
 from .settings import BEAM, ConsolidationSettings
 
+#: the front joins routes whose ends are up to this far apart (x L; consolidation's --join-gap when
+#: larger): an extractor often finds only the two ends of a tendon whose middle the sparse
+#: idealized pattern left slack, and the search proves every join on the as-built robot anyway
+JOIN_GAP = 0.5
 #: the as-built soft IK's precision (x L): errors closer than this are equal
 PRECISION = 1e-6
 #: two routes closer than this (mean distance between their resampled polylines, x L) are one route
@@ -50,7 +60,8 @@ SAME_ROUTE = 0.02
 @dataclass
 class Front:
     """The best layout found per tendon count (``layouts``, finished), and what the
-    search cost: ``seeds`` layouts it started from, ``pool`` distinct routes,
+    search cost: ``seeds`` layouts it started from, ``pool`` distinct routes
+    (``routes``),
     ``evaluations`` layouts solved in full, ``screened`` candidates screened,
     ``route_evaluations`` equilibria of route optimization in ``route_s`` seconds,
     ``time_s`` in all."""
@@ -58,6 +69,7 @@ class Front:
     layouts: dict[int, Layout] = field(default_factory=dict)
     seeds: int = 0
     pool: int = 0
+    routes: list[Route] = field(default_factory=list)
     evaluations: int = 0
     screened: int = 0
     route_evaluations: int = 0
@@ -121,7 +133,8 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
     are, no search."""
     t0 = time.perf_counter()
     say = log or (lambda text: None)
-    search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
+    wide = replace(options, gap=max(options.gap, JOIN_GAP))
+    search = _Search(problem, state, settings, solver, wide, route_settings(problem, options), "front", log)
     search.out = tally = Consolidation(consolidations[0].layout, 0, 0.0)
     size = problem.size
     by_count: dict[int, list[Layout]] = {}
@@ -133,7 +146,7 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
     pooled = _pooled(search, consolidations, size)
     if pooled is not None:
         by_count.setdefault(pooled.count, []).append(pooled)
-    front = Front(seeds=sum(len(v) for v in by_count.values()), pool=len(pool))
+    front = Front(seeds=sum(len(v) for v in by_count.values()), pool=len(pool), routes=pool)
     if not options.enabled:  # the extracted tendons' fitted routes as they are
         front.layouts = {k: _best(v, 1, size)[0] for k, v in sorted(by_count.items())
                          if max_tendons is None or k <= max_tendons}
@@ -151,11 +164,12 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
     counts = [k for k in sorted(by_count) if by_count[k] and (max_tendons is None or k <= max_tendons)]
     within = False
     for k in counts:
-        lay = by_count[k][0]
-        if not lay.optimized:
-            say(f"front: optimizing the routes of the best {k}-tendon layout")
-            rounds = 1 if within else options.refine
-            lay = replace(search.finish(lay, rounds)[0], source=sources(lay.routes))
+        # up to the first count within the budget, every layout the beam kept is finished (route
+        # optimization can reorder them: a join often gains most); above it, the best, one round
+        members = by_count[k][:1] if within else by_count[k]
+        say(f"front: optimizing the routes of the {'best' if len(members) == 1 else len(members)} "
+            f"{k}-tendon layout{'s' if len(members) > 1 else ''}")
+        lay = min((_finished(search, m, 1 if within else options.refine) for m in members), key=lambda m: m.cost)
         if k > 1 and k - 1 in front.layouts and lay.error > front.layouts[k - 1].error + PRECISION:
             lay = _one_more(search, front.layouts[k - 1], pool, lay, size)
         front.layouts[k] = lay
@@ -164,6 +178,14 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
     front.time_s = time.perf_counter() - t0
     return front
+
+
+def _finished(search: _Search, layout: Layout, rounds: int) -> Layout:
+    """The layout oriented and its routes optimized (at most ``rounds`` rounds),
+    unless it already was."""
+    if layout.optimized:
+        return layout
+    return replace(search.finish(layout, rounds)[0], source=sources(layout.routes))
 
 
 def _pooled(search: _Search, consolidations: list[Consolidation], size: float) -> Layout | None:
@@ -183,22 +205,24 @@ def _pooled(search: _Search, consolidations: list[Consolidation], size: float) -
     return None if lay is None else replace(lay, source=sources(routes))
 
 
-def _one_more(search: _Search, below: Layout, pool: list[Route], now: Layout, size: float) -> Layout:
-    """The better of ``now`` and the layout ``below`` (one tendon fewer) with one
-    more pooled route, the least costly as the Gauss-Newton screen predicts it,
-    solved from ``below``'s contractions and equilibria."""
-    extra = [r for r in pool if not any(same_route(r, q, size) for q in below.routes)]
-    if not extra:
-        return now
+def _with_one_more(search: _Search, below: Layout, pool: list[Route], size: float, n: int) -> list[Layout]:
+    """The layout ``below`` with one more pooled route it lacks: the ``n`` least
+    costly (screened by one Gauss-Newton step, then solved in full from
+    ``below``'s contractions and equilibria)."""
     start = np.atleast_2d(below.realizable.ratios).reshape(search.problem.n_poses, -1)
     cands = []
-    for r in extra:
-        add = search.start_ratios([r], np.full((search.problem.n_poses, 1), r.tension))
-        cands.append(Candidate("add", (), below.routes + [r], np.concatenate([start, add], axis=1)))
-    ranked = search.ranked(cands, below)
-    if ranked and ranked[0][1].error < now.error:
-        return replace(ranked[0][1], source=sources(ranked[0][1].routes))
-    return now
+    for r in pool:
+        if not any(same_route(r, q, size) for q in below.routes):
+            add = search.start_ratios([r], np.full((search.problem.n_poses, 1), r.tension))
+            cands.append(Candidate("add", (), below.routes + [r], np.concatenate([start, add], axis=1)))
+    return [replace(lay, source=sources(lay.routes)) for _, lay in search.ranked(cands, below)[:n]]
+
+
+def _one_more(search: _Search, below: Layout, pool: list[Route], now: Layout, size: float) -> Layout:
+    """The better (as built) of ``now`` and the best layout ``below`` (one tendon
+    fewer) with one more pooled route."""
+    more = _with_one_more(search, below, pool, size, 1)
+    return more[0] if more and more[0].error < now.error else now
 
 
 def pose_only_state(problem: Problem) -> IdealizedState:
@@ -210,9 +234,47 @@ def pose_only_state(problem: Problem) -> IdealizedState:
 
 
 def converged_error(fine: Problem, layout: Layout, state: IdealizedState, settings: OptimizeSettings,
-                    solver: str = "auto") -> RealizableResult:
+                    solver: str = "auto", start=None) -> RealizableResult:
     """A layout's as-built robot on a finer mesh of the same body (``fine``; ``state``
     from :func:`pose_only_state`): its routes, which do not depend on the mesh,
-    embedded in that mesh and their contractions solved again from the layout's."""
-    start = np.atleast_2d(layout.realizable.ratios).reshape(fine.n_poses, -1)
+    embedded in that mesh and their contractions solved again, from ``start`` (P, T)
+    or else the layout's own."""
+    start = np.atleast_2d(layout.realizable.ratios if start is None else start).reshape(fine.n_poses, -1)
     return solve_realizable_poses(fine, layout.tendons(), state, settings, solver, start)
+
+
+def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: Problem, settings: OptimizeSettings,
+                   options: ConsolidationSettings, solver: str = "auto",
+                   log: Callable[[str], None] | None = None) -> dict[int, RealizableResult | None]:
+    """Each front layout's as-built robot on the finer mesh ``fine``
+    (:func:`converged_error`; None where it cannot be solved), kept monotone there:
+    where a count's error is above the count below's by more than ``PRECISION``,
+    that smaller layout with one more pooled route (the two best on ``problem``'s
+    mesh) is solved on ``fine`` as well and replaces the front's layout when it
+    does better there."""
+    fine_state = pose_only_state(fine)
+    search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
+    search.out = Consolidation(next(iter(front.layouts.values())), 0, 0.0)
+    out: dict[int, RealizableResult | None] = {}
+
+    def solve(lay: Layout, start=None) -> RealizableResult | None:
+        try:
+            return converged_error(fine, lay, fine_state, settings, solver, start)
+        except ConvergenceError:
+            return None
+
+    for k in sorted(front.layouts):
+        res = solve(front.layouts[k])
+        below = out.get(k - 1)
+        if below is not None and (res is None or res.pose_error_rel > below.pose_error_rel + PRECISION):
+            for lay in _with_one_more(search, front.layouts[k - 1], front.routes, problem.size, 2):
+                start = np.concatenate([np.atleast_2d(below.ratios).reshape(fine.n_poses, -1),
+                                        np.atleast_2d(lay.realizable.ratios).reshape(fine.n_poses, -1)[:, -1:]],
+                                       axis=1)
+                more = solve(lay, start)
+                if more is not None and (res is None or more.pose_error_rel < res.pose_error_rel):
+                    front.layouts[k], res = lay, more
+        out[k] = res
+    front.evaluations += search.out.evaluations
+    front.screened += search.out.screened
+    return out

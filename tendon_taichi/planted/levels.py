@@ -42,8 +42,9 @@ def compare_levels(runs: dict[int, dict]) -> dict:
                       "same_count": len(set(counts.values())) == 1,
                       "fronts": {str(lv): [{k: e[k] for k in ("count", "realizable_pose_error_rel", "source")}
                                            for e in rows[lv][name]["front"]] for lv in levels}})
+    budget = (runs[levels[0]].get("consolidation") or {}).get("budget") if levels else None
     return {"levels": levels, "cases": cases, "same_count": sum(c["same_count"] for c in cases),
-            "totals": {str(lv): runs[lv]["totals"] for lv in levels}}
+            "budget": budget or 0.005, "totals": {str(lv): runs[lv]["totals"] for lv in levels}}
 
 
 def table(result: dict) -> list[str]:
@@ -59,8 +60,9 @@ def table(result: dict) -> list[str]:
 
 def fronts_figure(result: dict, columns: int = 4):
     """One panel per case: as-built error (% of L, log) against tendon count, one
-    line per level; the planted count dotted."""
+    line per level; the planted count dotted, the budget dashed."""
     cases = result["cases"]
+    columns = max(1, min(columns, len(cases)))
     rows = max(1, -(-len(cases) // columns))
     fig = new_figure(figsize=(3.2 * columns, 2.6 * rows))
     axes = fig.subplots(rows, columns, squeeze=False).ravel()
@@ -70,6 +72,8 @@ def fronts_figure(result: dict, columns: int = 4):
             ax.plot([e["count"] for e in front], [max(100 * e["realizable_pose_error_rel"], 1e-4) for e in front],
                     "o-", ms=3, label=f"level {lv}: {c['counts'][str(lv)]}")
         ax.axvline(c["planted_count"], ls=":", color="0.4")
+        ax.axhline(100 * result.get("budget", 0.005), ls="--", color="0.6", lw=0.8)
+        ax.set_xticks(sorted({e["count"] for f in c["fronts"].values() for e in f} | {c["planted_count"]}))
         ax.set_yscale("log")
         ax.set_title(f"{c['case']}{'' if c['same_count'] else ' (count moves)'}", fontsize=7)
         ax.tick_params(labelsize=6)
