@@ -156,6 +156,9 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
         raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
     ms = MetricSettings(mu=problem.scene.tendons.friction)
     front = search_front(problem, ex.state, ex.run.settings, done, cons, solver, max_tendons, beam, log)
+    if not front.layouts:
+        raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)" if max_tendons
+                         else "no extractor's tendons make a layout of one tendon or more")
     fine = finer_mesh_errors(ex, front, cons, solver, log) if converge else None
     rows = front_rows(front, fine, ms.mu, ms.kink_angle)
     chosen = recommend(rows, budget, max_tendons)

@@ -59,12 +59,11 @@ SAME_ROUTE = 0.02
 
 @dataclass
 class Front:
-    """The best layout found per tendon count (``layouts``, finished), and what the
-    search cost: ``seeds`` layouts it started from, ``pool`` distinct routes
-    (``routes``),
-    ``evaluations`` layouts solved in full, ``screened`` candidates screened,
-    ``route_evaluations`` equilibria of route optimization in ``route_s`` seconds,
-    ``time_s`` in all."""
+    """The best layout found per tendon count (``layouts``, finished; counts from 1),
+    and what the search cost: ``seeds`` layouts it started from, ``pool`` distinct
+    routes (``routes``), ``evaluations`` layouts solved in full, ``screened``
+    candidates screened, ``route_evaluations`` equilibria of route optimization in
+    ``route_s`` seconds, ``time_s`` in all."""
 
     layouts: dict[int, Layout] = field(default_factory=dict)
     seeds: int = 0
@@ -140,14 +139,15 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
     by_count: dict[int, list[Layout]] = {}
     for c in consolidations:
         for lay in c.front.values():
-            by_count.setdefault(lay.count, []).append(lay)
+            if lay.count:  # the bare body is no design
+                by_count.setdefault(lay.count, []).append(lay)
     pool = distinct_routes([r for c in consolidations for r in c.layout.routes]
                            + [r for c in consolidations for lay in c.front.values() for r in lay.routes], size)
     pooled = _pooled(search, consolidations, size)
     if pooled is not None:
         by_count.setdefault(pooled.count, []).append(pooled)
     front = Front(seeds=sum(len(v) for v in by_count.values()), pool=len(pool), routes=pool)
-    if not options.enabled:  # the extracted tendons' fitted routes as they are
+    if not by_count or not options.enabled:  # nothing to search, or the fitted routes as they are
         front.layouts = {k: _best(v, 1, size)[0] for k, v in sorted(by_count.items())
                          if max_tendons is None or k <= max_tendons}
         front.time_s = time.perf_counter() - t0
