@@ -117,3 +117,19 @@ def test_a_scene_name_cannot_steer_default_outputs(cli, tmp_path):
     assert r.returncode == 0, r.stderr
     written = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*") if p.is_file())
     assert written == ["a/b/recordings/_.._escaped_x-r1-simulate.npz", "a/b/s.toml"]
+
+
+def test_a_kernel_cache_that_cannot_be_written_is_a_warning_not_a_crash(tmp_path, monkeypatch, capsys):
+    """Taichi aborts the process when it cannot save its kernel cache (a home folder
+    that is not the user's); the runtime then starts without the cache and says so."""
+    import taichi as ti
+
+    from tendon_taichi.physics import runtime
+
+    (tmp_path / "afile").write_text("x")
+    monkeypatch.setenv("TI_OFFLINE_CACHE_FILE_PATH", str(tmp_path / "afile" / "ticache"))
+    assert runtime._cache_writable(ti) is False
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("tendon-taichi: warning: Taichi's kernel cache")
+    monkeypatch.setenv("TI_OFFLINE_CACHE_FILE_PATH", str(tmp_path / "cache"))
+    assert runtime._cache_writable(ti) is True and capsys.readouterr().err == ""

@@ -16,7 +16,9 @@ import contextlib
 import io
 import os
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 from ..errors import InputError
 
@@ -92,7 +94,7 @@ def init() -> str:
         return _state["arch"]
     arch = _requested_arch()
     kwargs = dict(arch=getattr(ti, arch), default_fp=ti.f64, default_ip=ti.i32,
-                  log_level=ti.WARN, offline_cache=True, random_seed=0)
+                  log_level=ti.WARN, offline_cache=_cache_writable(ti), random_seed=0)
     threads = _requested_threads()
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
@@ -108,6 +110,24 @@ def init() -> str:
     _state.update(initialized=True, arch=actual, init_s=time.perf_counter() - t0)
     _limit_blas()
     return actual
+
+
+def _cache_writable(ti) -> bool:
+    """Whether Taichi's compiled-kernel cache folder can be written; if not (a home
+    folder that is not the user's, a read-only one), Taichi would abort the process
+    when it saves the cache, so it runs without one and a warning says so."""
+    path = Path(os.environ.get("TI_OFFLINE_CACHE_FILE_PATH") or ti.lang.impl.default_cfg().offline_cache_file_path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+        if all(os.access(f, os.R_OK | os.W_OK) for f in path.glob("ticache.*")):
+            return True
+    except OSError:
+        pass
+    print(f"tendon-taichi: warning: Taichi's kernel cache '{path}' cannot be written: kernels are compiled "
+          f"again in every run (set TI_OFFLINE_CACHE_FILE_PATH to a writable folder)", file=sys.stderr)
+    return False
 
 
 def _limit_blas() -> None:
