@@ -2,6 +2,7 @@
 
 import json
 from importlib.metadata import entry_points
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -128,8 +129,9 @@ def test_a_kernel_cache_that_cannot_be_written_is_a_warning_not_a_crash(tmp_path
 
     (tmp_path / "afile").write_text("x")
     monkeypatch.setenv("TI_OFFLINE_CACHE_FILE_PATH", str(tmp_path / "afile" / "ticache"))
-    assert runtime._cache_writable(ti) is False
+    moved = runtime._kernel_cache(ti)
+    assert moved["offline_cache"] and Path(moved["offline_cache_file_path"]).is_dir()  # a temporary one
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("tendon-taichi: warning: Taichi's kernel cache")
     monkeypatch.setenv("TI_OFFLINE_CACHE_FILE_PATH", str(tmp_path / "cache"))
-    assert runtime._cache_writable(ti) is True and capsys.readouterr().err == ""
+    assert runtime._kernel_cache(ti) == {"offline_cache": True} and capsys.readouterr().err == ""

@@ -12,9 +12,11 @@ the defaults.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import io
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -94,7 +96,7 @@ def init() -> str:
         return _state["arch"]
     arch = _requested_arch()
     kwargs = dict(arch=getattr(ti, arch), default_fp=ti.f64, default_ip=ti.i32,
-                  log_level=ti.WARN, offline_cache=_cache_writable(ti), random_seed=0)
+                  log_level=ti.WARN, random_seed=0, **_kernel_cache(ti))
     threads = _requested_threads()
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
@@ -112,22 +114,25 @@ def init() -> str:
     return actual
 
 
-def _cache_writable(ti) -> bool:
-    """Whether Taichi's compiled-kernel cache folder can be written; if not (a home
-    folder that is not the user's, a read-only one), Taichi would abort the process
-    when it saves the cache, so it runs without one and a warning says so."""
+def _kernel_cache(ti) -> dict:
+    """Taichi's compiled-kernel cache settings: its usual folder when it can be
+    written; otherwise (a home folder that is not the user's, a read-only one),
+    where Taichi would abort the process, a temporary folder removed at exit, and a
+    warning."""
     path = Path(os.environ.get("TI_OFFLINE_CACHE_FILE_PATH") or ti.lang.impl.default_cfg().offline_cache_file_path)
     try:
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=path):
             pass
         if all(os.access(f, os.R_OK | os.W_OK) for f in path.glob("ticache.*")):
-            return True
+            return {"offline_cache": True}
     except OSError:
         pass
+    tmp = tempfile.mkdtemp(prefix="tendon-taichi-kernels-")
+    atexit.register(shutil.rmtree, tmp, True)
     print(f"tendon-taichi: warning: Taichi's kernel cache '{path}' cannot be written: kernels are compiled "
           f"again in every run (set TI_OFFLINE_CACHE_FILE_PATH to a writable folder)", file=sys.stderr)
-    return False
+    return {"offline_cache": True, "offline_cache_file_path": tmp}
 
 
 def _limit_blas() -> None:
