@@ -29,7 +29,7 @@ def test_every_script_has_a_test():
     scripts = {p.relative_to(BENCH).as_posix() for p in BENCH.rglob("*.py")}
     tested = {"simulate_levels.py", "how_it_works/make_figure.py", "planted/make_suite.py", "planted/reextract.py",
               "planted/counts_by_level.py", "sweeps/dask_overhead.py", "bench/make_bench.py",
-              "planted_results/make_results.py"}
+              "planted_results/make_results.py", "hostile_input/make_table.py"}
     assert scripts == tested
 
 
@@ -141,3 +141,21 @@ def test_make_bench_writes_the_results_and_the_page(tmp_path):
 
 def test_the_docs_generated_tables_are_current():
     run(ROOT / "docs" / "make_docs.py", "--check")
+
+
+def test_the_hostile_input_table_runs_a_case_and_writes_its_row(tmp_path):
+    """make_table.py's too-large cases (quick: refused before meshing) become table
+    rows with the exit status, the error line and what was left on disk."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("make_table", BENCH / "hostile_input" / "make_table.py")
+    mt = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mt)
+    b = mt.Bench.__new__(mt.Bench)  # without installing the demo plugin: these cases use none
+    b.work, b.env, b.rows = tmp_path, dict(os.environ), []
+    mt.too_large(b)
+    (first, second) = b.rows
+    assert first[2] == "2" and "finger at level 99 would have about" in first[3] and first[4] == "nothing"
+    assert second[2] == "2" and "degrees of freedom" in second[3] and second[4] == "`s.toml`"
+    text = mt.table(b.rows).splitlines()
+    assert text[0].startswith("| case |") and len(text) == 4 and text[2].startswith("| 9. `simulate finger")
