@@ -132,7 +132,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
 
     def on_iteration(it: Iterate):
         step[0] += 1
-        recorder.iteration(step[0], it.stage, it.k, it.figures, it.xs, it.taus)
+        recorder.iteration(step[0], it.stage, it.k, it.figures, it.xs, it.taus, local=it.iteration)
         progress.iteration(it)
 
     def on_stage_start(stage, k):

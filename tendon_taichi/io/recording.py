@@ -113,7 +113,6 @@ class Recorder:
         self.path = Path(path)
         self.problem, self.settings = problem, settings
         self.log_every = max(0, int(log_every))
-        self.stage_start: tuple[int, int] | None = None  # (stage, the step before its first iteration)
         self.edges = mesh_edges(problem.mesh.triangles)
         self.rec = rr.RecordingStream(APP_ID, recording_id=meta.get("run_id"), batcher_config=batcher())
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -145,9 +144,10 @@ class Recorder:
         self.rec.flush()
 
     def iteration(self, step: int, stage: int, k: float | None, figures, xs: np.ndarray,
-                  taus: np.ndarray, force: bool = False) -> None:
-        """Log one L-BFGS-B iteration (``step`` counts over the whole run) with the
-        per-pose positions ``xs`` (P, n, 2) and tensions ``taus`` (P, C)."""
+                  taus: np.ndarray, local: int = 0, force: bool = False) -> None:
+        """Log one L-BFGS-B iteration (``step`` counts over the whole run, ``local``
+        within its stage, from 1) with the per-pose positions ``xs`` (P, n, 2) and
+        tensions ``taus`` (P, C); ``force`` logs the geometry whatever ``local``."""
         rr, rec = self.rr, self.rec
         rec.set_time("stage", sequence=stage)
         rec.set_time("iteration", sequence=step)
@@ -156,9 +156,7 @@ class Recorder:
         rec.log("/metrics/figures/pose_error_rel", rr.Scalars(float(figures.pose_error_rel)))
         rec.log("/metrics/figures/active_fibers", rr.Scalars(float(figures.active_fibers)))
         rec.log("/metrics/figures/k", rr.Scalars(float(k) if k is not None else float("nan")))
-        if self.stage_start is None or self.stage_start[0] != stage:
-            self.stage_start = (stage, step - 1)
-        if not force and not geometry_due(step - self.stage_start[1], self.log_every):
+        if not force and not geometry_due(local, self.log_every):
             return
         names = self.problem.pose_names
         for i, (x, tau) in enumerate(zip(xs, taus)):
