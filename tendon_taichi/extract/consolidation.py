@@ -407,16 +407,6 @@ def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, 
     return out
 
 
-def finish(problem: Problem, layout: Layout, state: IdealizedState, settings: OptimizeSettings,
-           options: ConsolidationSettings, solver: str = "auto", log=None) -> Layout:
-    """A layout consolidation passed through, oriented and its routes optimized
-    as a consolidated one's are."""
-    search = _Search(problem, state, settings, solver, options, route_settings(problem, options), layout.source,
-                     log)
-    search.out = Consolidation(layout, layout.count, layout.error)
-    return search.finish(layout)[0]
-
-
 def route_settings(problem: Problem, options: ConsolidationSettings) -> RouteSettings:
     """The route optimization's settings: the scene's [tendons] table, and the price
     of the pull lost to friction from the budget (:mod:`.routing`)."""
