@@ -14,7 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "benchmarks"
 #: a short optimization that still ends sparse (a dense pattern would make consolidation slow)
-TINY = ("--set", "stage_iterations=30")
+TINY = ("--set", "stage_iterations=30", "--beam", 1, "--no-converge")
 
 
 def run(script: Path, *args, cwd=None, timeout=900):
@@ -44,7 +44,7 @@ def test_simulate_levels_prints_each_level_and_solver():
 def test_how_it_works_draws_five_panels(tmp_path):
     png = tmp_path / "h.png"
     r = run(BENCH / "how_it_works" / "make_figure.py", "t_shape_planted_1t_s1", "--level", 1,
-            "--stage-iterations", 30, "--out", png)
+            "--stage-iterations", 30, "--beam", 1, "--no-converge", "--out", png)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "tendons from" in r.stderr and "as built" in r.stderr
     from PIL import Image
     with Image.open(png) as im:

@@ -96,6 +96,7 @@ def test_planted_bench_command_on_one_case(tmp_path):
     assert "[1/1] snake_planted_1t_s1" in r.stderr
     (case,) = res["cases"]
     assert res["settings"] == {} and res["totals"]["cases"] == 1
+    assert res["front_search"] == {"beam": 3, "converge": True}
     assert set(case["extractors"]) >= {"strands", "network_discovery", "path_cover"}
     assert case["passed"] and route_rule(case), case
     assert case["count"] <= 2 and case["realizable_pose_error_rel"] <= 0.01 and case["length_ratio"] <= 2.0
@@ -129,6 +130,7 @@ def test_planted_bench_command_on_one_case(tmp_path):
     ([str(SUITE), "--sparsity", "-1"], "sparsity"),
     ([str(SUITE), "--levels", "1", "0"], "--resolution and --levels must be >= 1"),
     ([str(SUITE), "--levels", "1", "--resolution", "3"], "not allowed with argument"),
+    ([str(SUITE), "--beam", "0"], "--beam must be an integer >= 1"),
 ])
 def test_planted_bench_bad_input_is_one_line(tmp_path, args, message):
     r = _cli("planted-bench", *args, "--out", tmp_path / "pb")
@@ -139,22 +141,38 @@ def test_planted_bench_bad_input_is_one_line(tmp_path, args, message):
 def test_levels_compare_the_recommended_count_and_the_fronts():
     from tendon_taichi.planted.levels import compare_levels, fronts_figure, table
 
-    def case(name, count, errors):
+    def case(name, count, errors, planted=0.001):
         front = [{"count": k + 1, "realizable_pose_error_rel": e, "source": "strands"} for k, e in enumerate(errors)]
-        return {"case": name, "planted_count": 2, "count": count, "front": front}
+        return {"case": name, "planted_count": 2, "count": count, "front": front, "planted_as_built_error_rel": planted}
 
     runs = {lv: {"cases": [case("a", 2, [0.02, 0.001]), case("b", 2 if lv < 3 else 1, [0.004 * lv, 0.001]),
-                           {"case": "c", "error": "failed"} if lv == 2 else case("c", 1, [0.001])],
+                           {"case": "c", "error": "failed"} if lv == 2 else case("c", 1, [0.001]),
+                           case("d", 2, [0.007 + 0.003 * lv, 0.002, 0.001][:3 if lv < 3 else 2],
+                                planted=[0.002, 0.006, 0.009][lv - 1])],
                  "totals": {"passed": lv}} for lv in (1, 2, 3)}
     res = compare_levels(runs)
-    assert res["levels"] == [1, 2, 3] and [c["case"] for c in res["cases"]] == ["a", "b"]  # c failed at level 2
-    a, b = res["cases"]
+    assert res["levels"] == [1, 2, 3] and [c["case"] for c in res["cases"]] == ["a", "b", "d"]  # c failed at level 2
+    a, b, d = res["cases"]
     assert a["same_count"] and a["counts"] == {"1": 2, "2": 2, "3": 2}
-    assert not b["same_count"] and b["counts"]["3"] == 1 and res["same_count"] == 1
+    assert not b["same_count"] and b["counts"]["3"] == 1 and res["same_count"] == 2
     assert b["fronts"]["2"][0]["realizable_pose_error_rel"] == 0.008 and res["totals"]["3"] == {"passed": 3}
+    # the errors: a's are equal; b's one-tendon errors 0.4 / 0.8 / 1.2 % spread 0.8 % > max(0.1 %, 25 % of
+    # 1.2 %); d's 1.0 / 1.3 / 1.6 % spread 0.6 % > 0.4 %, but the planted tendons' own errors spread 0.7 %:
+    # the window is 0.75 %; d's third count is missing at level 3, so it is not compared
+    assert a["agreement"]["agree"] and a["agreement"]["compared"] == [1, 2]
+    bk = b["agreement"]["counts"]["1"]
+    assert bk["spread"] == pytest.approx(0.008) and bk["window"] == pytest.approx(0.003) and not bk["agree"]
+    assert not b["agreement"]["agree"] and b["agreement"]["counts"]["2"]["agree"]
+    dk = d["agreement"]["counts"]["1"]
+    assert d["agreement"]["planted_spread"] == pytest.approx(0.007)
+    assert dk["window"] == pytest.approx(0.0075) and dk["agree"] and d["agreement"]["agree"]
+    assert d["agreement"]["compared"] == [1, 2] and d["agreement"]["counts"]["3"]["errors"]["3"] is None
+    assert res["errors_agree"] == 2
     text = table(res)
-    assert text[-1] == "the same recommended count at every level in 1 of 2 cases"
-    assert text[2].split()[-1] == "no" and text[1].split()[1:] == ["2", "2", "2", "2", "yes"]
+    assert text[-1] == ("the same recommended count at every level in 2 of 3 cases; the front's errors agree up "
+                        "to planted + 1 tendons in 2 of 3")
+    assert text[2].split()[5:7] == ["no", "differ"] and text[2].split()[7] == "0.800%"
+    assert text[1].split()[1:7] == ["2", "2", "2", "2", "yes", "agree"] and text[3].split()[-1] == "0.700%"
     fig = fronts_figure(res)
     assert len(fig.axes[0].get_lines()) == 3 + 2  # a line per level, the planted count and the budget
     assert fig.axes[1].get_title() == "b (count moves)"

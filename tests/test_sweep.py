@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+import tomllib
 
 import pytest
 from distributed import Client
@@ -30,6 +31,9 @@ sparsity = [1.0e-4, 3.0e-4]
 stage_iterations = 15
 [consolidation]
 refine = 0
+[front]
+beam = 1
+converge = false
 """
 
 
@@ -69,7 +73,8 @@ def in_process(sweep_file, tmp_path_factory):
     """The figures of every case, each run by sweep.run_case in this process."""
     sw = load_sweep(sweep_file)
     out = tmp_path_factory.mktemp("one-by-one")
-    return {c.id: figures(run_case(c.scene, c.level, sw.solver, sw.extractors, str(out / c.id), sw.consolidation))
+    return {c.id: figures(run_case(c.scene, c.level, sw.solver, sw.extractors, str(out / c.id), sw.consolidation,
+                                   sw.front))
             for c in sw.cases}
 
 
@@ -93,8 +98,14 @@ def test_expansion_and_ids(tmp_path):
     sweep_file = tmp_path / "two.toml"  # two scenes x two sparsities
     sweep_file.write_text(TINY.replace('scenes = ["finger"]', 'scenes = ["t_shape", "finger"]'))
     sw = load_sweep(sweep_file)
-    assert sw.consolidation == {"refine": 0}
+    assert sw.consolidation == {"refine": 0} and sw.front == {"beam": 1, "converge": False}
     assert len(sw.cases) == 4
+    front = TINY[TINY.index("[front]"):]
+    plain = parse_sweep(tomllib.loads(TINY.replace(front, "")), "plain.toml")
+    default = parse_sweep(tomllib.loads(TINY.replace(front, "[front]\nbeam = 3\nconverge = true\n")), "d.toml")
+    assert plain.front == default.front == {"beam": 3, "converge": True}
+    assert [c.id for c in plain.cases] == [c.id for c in default.cases]  # the defaults leave the ids as they were
+    assert not {c.id for c in plain.cases} & {c.id for c in load_sweep(sweep_file).cases if c.scene.name == "finger"}
     assert [(c.scene.name, c.settings["sparsity"]) for c in sw.cases] == [
         ("t_shape", 1e-4), ("t_shape", 3e-4), ("finger", 1e-4), ("finger", 3e-4)]
     assert all(c.settings["stage_iterations"] == 15 and c.scene.optimize.stage_iterations == 15 for c in sw.cases)
@@ -118,6 +129,11 @@ def test_expansion_and_ids(tmp_path):
     ({"scenes": ["t_shape"], "solver": "lu"}, "'solver' must be one of"),
     ({"scenes": ["t_shape"], "consolidation": {"refine": -1}}, "consolidation.refine must be an integer >= 0"),
     ({"scenes": ["t_shape"], "consolidation": {"rounds": 1}}, "unknown consolidation setting 'rounds'"),
+    ({"scenes": ["t_shape"], "front": {"beam": 0}}, "front.beam must be an integer >= 1"),
+    ({"scenes": ["t_shape"], "front": {"beam": 1.5}}, "front.beam must be an integer >= 1"),
+    ({"scenes": ["t_shape"], "front": {"converge": "no"}}, "front.converge must be true or false"),
+    ({"scenes": ["t_shape"], "front": {"width": 2}}, "unknown front setting 'width'"),
+    ({"scenes": ["t_shape"], "front": 3}, "[front] must be a table"),
     ({"scenes": ["t_shape"], "grid": {"friction": [0.1, -0.1]}}, "tendons.friction must be"),
 ])
 def test_bad_sweep_files_are_rejected(doc, message):
@@ -157,6 +173,8 @@ def test_local_cluster_matches_one_by_one_and_reruns_reuse(sweep_file, in_proces
         assert {"run.rrd", "run.npz", "optimize.json", "compare.json", "result.json"} <= {p.name for p in d.iterdir()}
         compare = json.loads((d / "compare.json").read_text())
         assert [e["name"] for e in compare["extractors"]] == ["strands", "path_cover"]
+        search = json.loads((d / "design.json").read_text())["search"]
+        assert search["beam"] == 1 and search["converged_resolution"] is None  # the [front] table reached it
     header = (out / "sweep.csv").read_text().splitlines()[0].split(",")
     assert {"case", "settings.sparsity", "optimize.pose_error_rel", "extract.strands.count",
             "extract.path_cover.realizable_pose_error_rel", "design.count", "design.capstan_worst",
@@ -260,7 +278,8 @@ def test_a_failing_case_is_recorded_and_the_sweep_goes_on(tmp_path):
     (tmp_path / "bad.toml").write_text(text.replace("point = [0.10, 0.01]", "point = [0.50, 0.01]")
                                        .replace('name = "finger"', 'name = "finger_bad"'))
     (tmp_path / "s.toml").write_text('scenes = ["finger", "bad.toml"]\nextractors = ["strands"]\n'
-                                     '[set]\nstage_iterations = 5\n[consolidation]\nrefine = 0\n')
+                                     '[set]\nstage_iterations = 5\n[consolidation]\nrefine = 0\n'
+                                     '[front]\nbeam = 1\nconverge = false\n')
     out = tmp_path / "out"
     r = run_cli("sweep", tmp_path / "s.toml", "--out", out, "--workers", "0", "--json")
     assert r.returncode == 4, r.stderr  # finished, with a failed case

@@ -2,10 +2,10 @@
 to the as-built robot of the recommended design.
 
 Usage: python benchmarks/how_it_works/make_figure.py [CASE] [--level N] [--out PNG]
-       [--stage-iterations N] [--k-min K]
+       [--stage-iterations N] [--k-min K] [--beam B] [--no-converge]
 (default: t_shape_planted_2t_s2 at level 2, a few minutes). Runs the design
-pipeline on the planted scene with the default settings (or these two
-overridden, for a quick look): optimize, every extractor on the last stage,
+pipeline on the planted scene with the default settings (or these overridden,
+for a quick look): optimize, every extractor on the last stage,
 consolidation and route optimization, the recommended design; and writes
 how_it_works.png beside this file (or to --out); the PNG records the commit
 that made it.
@@ -21,6 +21,7 @@ from types import SimpleNamespace
 from tendon_taichi import load_scene
 from tendon_taichi.apps.case import run_case
 from tendon_taichi.body.scene import with_overrides
+from tendon_taichi.extract.settings import BEAM
 from tendon_taichi.io.plots import plot_story
 
 HERE = Path(__file__).resolve().parent
@@ -34,12 +35,14 @@ def main():
     ap.add_argument("--out", type=Path, default=HERE / "how_it_works.png")
     ap.add_argument("--stage-iterations", type=int)
     ap.add_argument("--k-min", type=float)
+    ap.add_argument("--beam", type=int, default=BEAM, help=f"the front's beam width (default {BEAM})")
+    ap.add_argument("--no-converge", action="store_true", help="the front's errors on the design's own mesh")
     args = ap.parse_args()
     layout = json.loads((SUITE / f"{args.case}.json").read_text())
     scene = with_overrides(load_scene(SUITE / f"{args.case}.toml"),
                            {"stage_iterations": args.stage_iterations, "k_min": args.k_min})
     with tempfile.TemporaryDirectory() as tmp:
-        design = run_case(scene, args.level, Path(tmp) / "design")
+        design = run_case(scene, args.level, Path(tmp) / "design", beam=args.beam, converge=not args.no_converge)
     run, rec = design.run, design.summary["recommended"]
     s0, final = run.stages[0], run.stages[-1]
     shown = SimpleNamespace(name=f"design, from {rec['source']}", metrics=rec["metrics"],

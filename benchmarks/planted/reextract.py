@@ -7,7 +7,8 @@ RUN.json is the planted_bench.json of `tendon-taichi planted-bench`; its cases'
 recordings are extracted again (every extractor, consolidation and route
 optimization with the run's settings, or ``--budget F`` as the pose budget,
 ``--refine N`` rounds of route optimization and ``--screen N``), and the
-design is recommended again, without optimizing again, and scored by the
+design is recommended again (the count/error front searched with the run's
+``beam`` and ``converge``), without optimizing again, and scored by the
 bench's own rules. OUT.json has the same shape (``cases``, ``totals``;
 ``time_s`` is the extraction time), so counts_by_level.py reads it.
 ``--bench-dir DIR`` also writes the result as a planted-bench run
@@ -25,14 +26,16 @@ import time
 from pathlib import Path
 
 from tendon_taichi.apps.design import recommended
-from tendon_taichi.extract.settings import REFINE, SCREEN, ConsolidationSettings
+from tendon_taichi.extract.settings import FRONT_DEFAULTS, REFINE, SCREEN, ConsolidationSettings
 from tendon_taichi.planted.bench import load_suite, score_design, totals, write_outputs
 
 
-def rescore(case: dict, consolidation: ConsolidationSettings) -> dict:
-    """The case designed again from its recording and scored again."""
+def rescore(case: dict, consolidation: ConsolidationSettings, front: dict | None = None) -> dict:
+    """The case designed again from its recording (``front``: the front's ``beam``
+    and ``converge``) and scored again."""
     t0 = time.perf_counter()
-    _, _, summary = recommended(case["recording"], consolidation.budget or 0.005, consolidation=consolidation)
+    _, _, summary = recommended(case["recording"], consolidation.budget or 0.005, consolidation=consolidation,
+                                **{**FRONT_DEFAULTS, **(front or {})})
     figures = score_design(summary, case["planted_count"], case["length_ratio"])
     return {**case, **figures, "time_s": time.perf_counter() - t0}
 
@@ -56,7 +59,7 @@ def main(argv=None):
     for c in src["cases"]:
         if "error" in c or (args.cases and c["case"] not in args.cases):
             continue
-        cases.append(rescore(c, consolidation))
+        cases.append(rescore(c, consolidation, src.get("front_search")))
         n = cases[-1]
         print(f"{n['case']}: {n['count']}/{n['planted_count']} tendons ({n['best']}), as built "
               f"{100 * n['realizable_pose_error_rel']:.2f}%, capstan {n['capstan_worst']:.2f} (planted "

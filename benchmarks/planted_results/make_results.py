@@ -1,11 +1,11 @@
 """Regenerate the checked-in planted-suite results in this folder.
 
 Usage: python benchmarks/planted_results/make_results.py [--levels 1 2 3] [--out DIR] [--runs DIR]
-       [--workers N] [--cases NAME ...] [--set KEY=VALUE ...]
+       [--workers N] [--cases NAME ...] [--set KEY=VALUE ...] [--beam B] [--no-converge]
 
 For each level, runs `tendon-taichi planted-bench benchmarks/planted --resolution
 LEVEL --out RUNS/rLEVEL` (default settings, or the [optimize] settings given by
---set; finished cases in RUNS are reused), then writes into DIR (default: this
+--set and the front's --beam and --no-converge; finished cases in RUNS are reused), then writes into DIR (default: this
 folder) planted_bench_level<LEVEL>.csv, gallery_level<LEVEL>.png,
 counts_by_level.md (benchmarks/planted/counts_by_level.py's table) and
 worst_cases.png (the three worst results over every level run) and README.md,
@@ -21,6 +21,7 @@ import sys
 import tomllib
 from pathlib import Path
 
+from tendon_taichi.extract.settings import BEAM
 from tendon_taichi.planted.bench import load_suite, route_rule, run_suite
 from tendon_taichi.planted.gallery import gallery_figure
 from tendon_taichi.version import provenance
@@ -142,12 +143,15 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--cases", nargs="+")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="an [optimize] setting")
+    ap.add_argument("--beam", type=int, default=BEAM, help=f"the front's beam width (default {BEAM})")
+    ap.add_argument("--no-converge", action="store_true", help="the front's errors on each level's own mesh")
     args = ap.parse_args(argv)
+    front = {"beam": args.beam, "converge": not args.no_converge}
     overrides = dict(_setting(s) for s in args.set)
     runs = []
     for level in args.levels:
         run_dir = args.runs / f"r{level}"
-        runs.append(run_suite(SUITE, level, run_dir, overrides, cases=args.cases, workers=args.workers))
+        runs.append(run_suite(SUITE, level, run_dir, overrides, cases=args.cases, workers=args.workers, front=front))
         args.out.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(run_dir / "planted_bench.csv", args.out / f"planted_bench_level{level}.csv")
         shutil.copyfile(run_dir / "gallery.png", args.out / f"gallery_level{level}.png")

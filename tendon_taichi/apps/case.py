@@ -16,7 +16,7 @@ from functools import partial
 from pathlib import Path
 
 from ..body.scene import Scene, load_scene, with_overrides
-from ..extract.settings import BUDGET, ConsolidationSettings
+from ..extract.settings import BEAM, BUDGET, ConsolidationSettings
 from ..physics import runtime
 from .design import Design, design
 from .optimize import Interrupted
@@ -27,14 +27,15 @@ STOP = (Interrupted,)
 
 def run_case(scene: Scene, level: int, out: str | Path, solver: str = "auto",
              extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
-             budget: float = BUDGET, png: bool = False, converge: bool = True) -> Design:
+             budget: float = BUDGET, png: bool = False, beam: int = BEAM, converge: bool = True) -> Design:
     """The design of ``scene`` at ``level`` into the folder ``out`` (``run.rrd``,
     ``run.npz``, ``design.json``, ``design.svg``; the pictures with ``png``), with
     ``extractors`` (default: every installed one), each followed by
-    ``consolidation`` (default settings, with ``budget``, if None); ``converge``
-    re-solves the front on the next finer mesh."""
+    ``consolidation`` (default settings, with ``budget``, if None); ``beam``: the
+    front's beam width; ``converge`` re-solves the front on the next finer mesh."""
     return design(scene, level, out, solver, budget, extractors=extractors,
-                  consolidation=consolidation or ConsolidationSettings(budget=budget), png=png, converge=converge)
+                  consolidation=consolidation or ConsolidationSettings(budget=budget), png=png, beam=beam,
+                  converge=converge)
 
 
 def warm_up() -> float:

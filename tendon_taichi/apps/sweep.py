@@ -30,7 +30,7 @@ from pathlib import Path
 from ..body.scene import Scene, load_scene, with_overrides
 from ..errors import InputError, Stopped
 from ..extract.plugins import available_extractors
-from ..extract.settings import BUDGET, ConsolidationSettings
+from ..extract.settings import BUDGET, FRONT_DEFAULTS, ConsolidationSettings
 from ..files import atomic_path, write_json
 from ..io.plots import plot_sweep
 from ..io.progress import Progress
@@ -40,7 +40,7 @@ from ..version import provenance
 from .case import STOP, worker_setup
 from .case import run_case as run_one
 
-SWEEP_KEYS = ("name", "scenes", "levels", "extractors", "solver", "grid", "set", "consolidation")
+SWEEP_KEYS = ("name", "scenes", "levels", "extractors", "solver", "grid", "set", "consolidation", "front")
 #: grid and set keys that are [tendons] settings (the others are [optimize] ones)
 TENDON_KEYS = ("friction", "clearance")
 
@@ -89,6 +89,7 @@ class Sweep:
     fixed: dict
     cases: tuple[SweepCase, ...]
     consolidation: dict = field(default_factory=dict)  # the [consolidation] table: ConsolidationSettings fields
+    front: dict = field(default_factory=lambda: dict(FRONT_DEFAULTS))  # the [front] table over the defaults
 
 
 def _fail(origin: str, msg: str):
@@ -148,6 +149,8 @@ def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None,
     for key in set(grid) & set(fixed):
         _fail(origin, f"'{key}' is both in [grid] and in [set]")
     consolidation = _consolidation(doc.get("consolidation", {}), origin)
+    front = _front(doc.get("front", {}), origin)
+    changed = {k: v for k, v in front.items() if v != FRONT_DEFAULTS[k]}  # the defaults keep earlier runs' ids
     loaded = [_scene(s, base, origin) for s in scenes]
     given = {k: v for k, v in (tendons or {}).items() if v is not None}
     cases = []
@@ -161,10 +164,10 @@ def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None,
             sc = sc.with_tendons(**given)
             cid = case_id({"kind": "sweep-design", **_scene_digest(scene), "level": level, "settings": settings,
                            "tendons": given, "extractors": list(extractors), "solver": solver,
-                           "consolidation": consolidation})
+                           "consolidation": consolidation, **({"front": changed} if changed else {})})
             cases.append(SweepCase(cid, sc, level, settings, point))
     return Sweep(name, None, tuple(loaded), tuple(levels), tuple(extractors), solver, dict(grid), dict(fixed),
-                 tuple(cases), consolidation)
+                 tuple(cases), consolidation, front)
 
 
 def _consolidation(table, origin: str) -> dict:
@@ -181,6 +184,21 @@ def _consolidation(table, origin: str) -> dict:
             _fail(origin, f"consolidation.{key} must be {'an integer' if whole else 'a number'} >= 0 "
                           f"(got {value!r})")
     return dict(table)
+
+
+def _front(table, origin: str) -> dict:
+    """The [front] table (``beam``, an integer >= 1; ``converge``, true or false)
+    over :data:`~tendon_taichi.extract.settings.FRONT_DEFAULTS`, checked."""
+    if not isinstance(table, dict):
+        _fail(origin, "[front] must be a table")
+    for key, value in table.items():
+        if key not in FRONT_DEFAULTS:
+            _fail(origin, f"unknown front setting '{key}' (known: {', '.join(FRONT_DEFAULTS)})")
+        if key == "beam" and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+            _fail(origin, f"front.beam must be an integer >= 1 (got {value!r})")
+        if key == "converge" and not isinstance(value, bool):
+            _fail(origin, f"front.converge must be true or false (got {value!r})")
+    return {**FRONT_DEFAULTS, **table}
 
 
 def load_sweep(path: str | Path, tendons: dict | None = None) -> Sweep:
@@ -206,17 +224,17 @@ DESIGN_KEYS = ("realizable_pose_error_rel", "realizable_pose_error_rel_frictionl
 
 
 def run_case(scene: Scene, level: int, solver: str, extractors: tuple[str, ...], case_dir: str,
-             consolidation: dict | None = None) -> dict:
+             consolidation: dict | None = None, front: dict | None = None) -> dict:
     """Design ``scene`` at ``level`` with ``extractors`` (and the fields of
     :class:`~tendon_taichi.extract.settings.ConsolidationSettings` given in
-    ``consolidation``) into ``case_dir`` (``run.rrd``, ``run.npz``, ``design.json``,
+    ``consolidation``, the front's ``beam`` and ``converge`` in ``front``) into ``case_dir`` (``run.rrd``, ``run.npz``, ``design.json``,
     ``design.svg``, ``optimize.json``, ``compare.json``). Returns the case's
     figures: ``optimize`` (the final stage), ``extract`` (per extractor its
     metrics, or its error), ``design`` (the recommended design's count, source
     and figures), ``stages``."""
     d = Path(case_dir)
     cons = ConsolidationSettings(**(consolidation or {}))
-    case = run_one(scene, level, d, solver, list(extractors), cons, budget=cons.budget or BUDGET)
+    case = run_one(scene, level, d, solver, list(extractors), cons, budget=cons.budget or BUDGET, **(front or {}))
     run, comp = case.run, case.extraction.as_json()
     write_json(run.summary, d / "optimize.json")
     write_json(comp, d / "compare.json")
@@ -248,7 +266,7 @@ def run(sweep: Sweep | str | Path, out_dir: str | Path, workers: int | None = No
     out = Path(out_dir)
     t0 = time.perf_counter()
     tasks = [Task(c.id, c.label, run_case, (c.scene, c.level, sw.solver, sw.extractors, str(out / "cases" / c.id),
-                                             sw.consolidation))
+                                             sw.consolidation, sw.front))
              for c in sw.cases]
     report = run_tasks(tasks, out / "cases", workers, scheduler, progress or Progress(), describe=_describe,
                        setup=worker_setup(), stop=STOP)
@@ -256,7 +274,8 @@ def run(sweep: Sweep | str | Path, out_dir: str | Path, workers: int | None = No
     rows = [case_row(by_id[o.task.id], o) for o in report.outcomes]
     result = {"name": sw.name, "sweep": str(sw.path) if sw.path else None,
               "scenes": [s.name for s in sw.scenes], "levels": list(sw.levels), "extractors": list(sw.extractors),
-              "solver": sw.solver, "grid": sw.grid, "set": sw.fixed, "consolidation": sw.consolidation, "cases": rows,
+              "solver": sw.solver, "grid": sw.grid, "set": sw.fixed, "consolidation": sw.consolidation,
+              "front": sw.front, "cases": rows,
               "failed": sum("error" in r for r in rows), "reused": sum(r["reused"] for r in rows),
               "interrupted": report.interrupted, "engine": report.engine, "provenance": provenance(),
               "time_s": time.perf_counter() - t0}

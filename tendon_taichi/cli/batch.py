@@ -11,7 +11,8 @@ from ..errors import InputError
 from ..files import file_stem
 from .common import SOLVER_CHOICES, add_json, json_out
 from .runs import add_optimize_flags, optimize_overrides
-from .tendons import add_consolidation_flags, add_tendon_flags, consolidation, tendon_settings
+from .tendons import (add_consolidation_flags, add_front_flags, add_tendon_flags, consolidation, front_settings,
+                      tendon_settings)
 
 
 # ------------------------------------------------------------------ bench
@@ -86,7 +87,7 @@ def cmd_planted_bench(args) -> int:
         raise InputError("--resolution and --levels must be >= 1")
     kwargs = dict(overrides=overrides, extractors=args.extractors, solver=args.solver, cases=args.cases,
                   workers=workers, scheduler=scheduler, consolidation=consolidation(args),
-                  tendons=tendon_settings(args))
+                  tendons=tendon_settings(args), front=front_settings(args))
     if args.levels:
         from ..planted.levels import run_levels
         from ..planted.levels import table as levels_table
@@ -185,6 +186,7 @@ def add_commands(sub) -> None:
     s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto")
     add_optimize_flags(s)
     add_consolidation_flags(s)
+    add_front_flags(s)
     add_tendon_flags(s)
     add_cluster_flags(s, "default: one per core")
     add_json(s)

@@ -9,10 +9,11 @@ import numpy as np
 
 from ..errors import InputError
 from ..extract.checks import PLUGIN_TIMEOUT
-from ..extract.settings import BEAM, BUDGET
+from ..extract.settings import BUDGET
 from .common import PROG, SOLVER_CHOICES, add_json, json_out
 from .runs import add_optimize_flags, optimize_overrides
-from .tendons import add_consolidation_flags, add_tendon_flags, consolidation, plugin_timeout, tendon_settings
+from .tendons import (add_consolidation_flags, add_front_flags, add_tendon_flags, consolidation, front_settings,
+                      plugin_timeout, tendon_settings)
 
 
 def _checked(args) -> tuple[float, int | None]:
@@ -20,8 +21,6 @@ def _checked(args) -> tuple[float, int | None]:
         raise InputError(f"--budget must be a fraction of L in (0, 1) (got {args.budget:g})")
     if args.max_tendons is not None and args.max_tendons < 1:
         raise InputError(f"--max-tendons must be an integer >= 1 (got {args.max_tendons})")
-    if args.beam < 1:
-        raise InputError(f"--beam must be an integer >= 1 (got {args.beam})")
     return args.budget, args.max_tendons
 
 
@@ -65,6 +64,7 @@ def cmd_design(args) -> int:
     from ..io.progress import Progress
 
     budget, max_tendons = _checked(args)
+    front = front_settings(args)
     tendons = tendon_settings(args)
     cons = consolidation(args, budget=budget)
     timeout = plugin_timeout(args)
@@ -72,8 +72,7 @@ def cmd_design(args) -> int:
         raise InputError(f"--resolution must be >= 1 (got {args.resolution})")
     scene = with_overrides(load_scene(args.scene), optimize_overrides(args)).with_tendons(**tendons)
     result = design(scene, args.resolution, args.out, args.solver, budget, max_tendons, args.extractors, cons,
-                    Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png, beam=args.beam,
-                    converge=not args.no_converge)
+                    Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png, **front)
     summary = result.summary
     json_out(args, summary)
     if args.json != "-":
@@ -94,10 +93,7 @@ def add_commands(sub) -> None:
                         "design is the fewest tendons within it")
     s.add_argument("--max-tendons", type=int, default=None, metavar="K",
                    help="recommend at most K tendons")
-    s.add_argument("--beam", type=int, default=BEAM, metavar="B",
-                   help=f"layouts kept per tendon count by the front's beam search (default {BEAM})")
-    s.add_argument("--no-converge", action="store_true",
-                   help="report the front's errors on the design's mesh, not re-solved on the next finer one")
+    add_front_flags(s)
     s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")
     s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto", help="linear solver (default auto)")
     add_tendon_flags(s)

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import InputError, TendonError
 from ..extract.checks import PLUGIN_TIMEOUT
-from ..extract.settings import BUDGET, GAP, REFINE, SCREEN, TOLERANCE, ConsolidationSettings
+from ..extract.settings import BEAM, BUDGET, GAP, REFINE, SCREEN, TOLERANCE, ConsolidationSettings
 from .common import PROG, SOLVER_CHOICES, add_json, json_out
 
 
@@ -123,6 +123,23 @@ def add_consolidation_flags(p: argparse.ArgumentParser, budget: bool = True) -> 
                    help="solve in full only the N drops and joins a Gauss-Newton step predicts best "
                         f"(default {SCREEN}; 0: solve every one)")
     p.add_argument("--no-consolidate", action="store_true", help="keep the extracted tendons' routes as they are")
+
+
+def add_front_flags(p: argparse.ArgumentParser) -> None:
+    """``--beam`` and ``--no-converge``: how wide the count/error front searches, and
+    whether its errors are re-solved on the next finer mesh."""
+    p.add_argument("--beam", type=int, default=BEAM, metavar="B",
+                   help=f"layouts kept per tendon count by the front's beam search (default {BEAM})")
+    p.add_argument("--no-converge", action="store_true",
+                   help="report the front's errors on the design's mesh, not re-solved on the next finer one")
+
+
+def front_settings(args) -> dict:
+    """``beam`` and ``converge`` of the command line, validated (keyword arguments
+    of :func:`tendon_taichi.apps.design.design`)."""
+    if args.beam < 1:
+        raise InputError(f"--beam must be an integer >= 1 (got {args.beam})")
+    return {"beam": args.beam, "converge": not args.no_converge}
 
 
 def add_tendon_flags(p: argparse.ArgumentParser) -> None:

@@ -15,6 +15,9 @@ REFINE = 2
 SCREEN = 4
 #: layouts kept per tendon count by the count/error front's beam search
 BEAM = 3
+#: the count/error front's settings as ``design`` takes them: ``beam`` (above) and
+#: ``converge``, whether each entry is re-solved on the next finer mesh
+FRONT_DEFAULTS = {"beam": BEAM, "converge": True}
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,7 @@ from ..body.problem import Problem
 from ..body.scene import load_scene, with_overrides
 from ..errors import ConvergenceError, InputError, Stopped
 from ..extract.consolidation import ConsolidationSettings
+from ..extract.settings import FRONT_DEFAULTS
 from ..extract.plugins import available_extractors
 from ..extract.protocol import IdealizedState, Tendon, turn_angles
 from ..extract.realizable import solve_realizable_poses
@@ -122,10 +123,12 @@ def planted_figures(problem: Problem, layout: dict, solver: str = "auto") -> dic
 
 def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Path,
              overrides: dict | None = None, extractors: list[str] | None = None,
-             solver: str = "auto", consolidation: dict | None = None, tendons: dict | None = None) -> dict:
+             solver: str = "auto", consolidation: dict | None = None, tendons: dict | None = None,
+             front: dict | None = None) -> dict:
     """Design one planted case (``consolidation``: the fields of
     :class:`~tendon_taichi.extract.consolidation.ConsolidationSettings`; ``tendons``:
-    [tendons] settings to replace); its files go to ``out_dir/NAME-rLEVEL/``.
+    [tendons] settings to replace; ``front``: ``beam`` and ``converge`` of the
+    count/error front, default if absent); its files go to ``out_dir/NAME-rLEVEL/``.
     Returns the case's figures."""
     t0 = time.perf_counter()
     scene = load_scene(str(scene_path))
@@ -136,7 +139,7 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
     name, planted_count, planted_length = case.name, case.planted_count, case.planted_length
     folder = Path(out_dir) / f"{file_stem(name)}-r{level}"
     cons = ConsolidationSettings(**(consolidation or {}))
-    d = run_one(scene, level, folder, solver, extractors, cons, budget=cons.budget or 0.005)
+    d = run_one(scene, level, folder, solver, extractors, cons, budget=cons.budget or 0.005, **(front or {}))
     run, summary = d.run, d.summary
     final = run.summary["final"]
     length_ratio = final["active_length"] / planted_length if planted_length > 0 else float("inf")
@@ -230,12 +233,13 @@ def _describe(row: dict) -> str:
 def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides: dict | None = None,
               extractors: list[str] | None = None, solver: str = "auto", cases: list[str] | None = None,
               progress=None, workers: int | None = None, scheduler: str | None = None,
-              consolidation=None, tendons: dict | None = None) -> dict:
+              consolidation=None, tendons: dict | None = None, front: dict | None = None) -> dict:
     """Run every case of a suite (or the named ``cases``) as tasks of
     :func:`tendon_taichi.tasks.engine.run_tasks` (``workers``: local Dask cluster size,
     None: one per core, 0: in this process; ``scheduler``: an existing cluster).
     ``consolidation`` (:class:`~tendon_taichi.extract.consolidation.ConsolidationSettings`,
-    default settings if None) follows every extractor.
+    default settings if None) follows every extractor; ``front``: ``beam`` and
+    ``converge`` of the count/error front (the defaults of ``design`` if absent).
     Outputs are rewritten after each case, and a re-run reuses the finished ones
     (``out_dir/cases/<id>/result.json``), so an interrupted run keeps what it did."""
     suite = load_suite(directory)
@@ -250,17 +254,19 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
         with_overrides(load_scene(str(case.scene_path)), overrides).with_tendons(**tendons)
     names = sorted(extractors or available_extractors())
     cons = dataclasses.asdict(consolidation or ConsolidationSettings())
+    search = {**FRONT_DEFAULTS, **(front or {})}
+    changed = {k: v for k, v in search.items() if v != FRONT_DEFAULTS[k]}  # the defaults keep earlier runs' ids
     out_dir = Path(out_dir)
     tasks = [Task(case_id({"kind": "planted-design", "scene": case.scene_path.read_text(), "layout": case.layout,
                            "level": level, "settings": overrides, "extractors": names, "solver": solver,
-                           "consolidation": cons, "tendons": tendons}),
+                           "consolidation": cons, "tendons": tendons, **({"front": changed} if changed else {})}),
                   case.name, run_case,
                   (str(case.scene_path), case.layout, level, str(out_dir / "cases"), overrides, names, solver,
-                   cons, tendons))
+                   cons, tendons, search))
              for case in suite]
     by_name = {c.name: c for c in suite}
     result = {"suite": str(directory), "level": level, "settings": overrides, "consolidation": cons,
-              "tendons": tendons, "provenance": provenance(), "cases": []}
+              "tendons": tendons, "front_search": search, "provenance": provenance(), "cases": []}
     done = {}
 
     def on_outcome(o) -> None:

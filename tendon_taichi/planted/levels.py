@@ -1,6 +1,16 @@
 """``planted-bench --levels``: the suite at several resolution levels, and per case
-the count/error front of every level and whether the recommended tendon count
-is the same at all of them (a design that does not depend on the mesh).
+the count/error front of every level, whether the recommended tendon count
+is the same at all of them (a design that does not depend on the mesh), and
+whether the front's mesh-converged errors agree across levels.
+
+**Agreement.** For each count k up to planted + 1 that every level's front has,
+the errors at the levels agree when their spread (largest - smallest) is at
+most ``AGREE_ABS`` (0.1 % of L) or ``AGREE_REL`` (25 %) of the largest,
+whichever is larger. The finite-element discretization alone moves an
+as-built error too: the planted tendons' own as-built error, their
+contractions re-solved at each level against the same goals, has a spread
+across the levels; where that spread is larger than the window, the window
+is that spread plus ``AGREE_SLACK`` (0.05 % of L).
 
 Each level runs as :func:`~tendon_taichi.planted.bench.run_suite` into
 ``OUT/level<N>/``; ``OUT/levels.json`` holds the comparison and
@@ -13,6 +23,13 @@ from pathlib import Path
 from ..files import write_json
 from ..io.plots import new_figure, save_png
 from .bench import run_suite
+
+#: the front's errors at several levels agree within this (x L) ...
+AGREE_ABS = 1e-3
+#: ... or this fraction of the largest, whichever is larger
+AGREE_REL = 0.25
+#: added to the planted tendons' own spread where that is wider (x L)
+AGREE_SLACK = 5e-4
 
 
 def run_levels(directory: str | Path, levels: list[int], out_dir: str | Path, **kwargs) -> dict:
@@ -29,9 +46,10 @@ def run_levels(directory: str | Path, levels: list[int], out_dir: str | Path, **
 
 def compare_levels(runs: dict[int, dict]) -> dict:
     """Per case (those finished at every level): the recommended ``counts`` per level,
-    ``same_count`` (the same at all), the planted count, and per level the
-    ``fronts`` (count, as-built error - the mesh-converged one - and where each
-    came from); ``same_count`` in all, and the runs' totals per level."""
+    ``same_count`` (the same at all), the planted count, per level the ``fronts``
+    (count, as-built error - the mesh-converged one - and where each came from),
+    and the errors' ``agreement`` (:func:`agreement`); ``same_count`` and
+    ``errors_agree`` in all, and the runs' totals per level."""
     levels = sorted(runs)
     rows = {lv: {c["case"]: c for c in runs[lv]["cases"] if "error" not in c} for lv in levels}
     names = sorted(set.intersection(*(set(r) for r in rows.values()))) if rows else []
@@ -42,19 +60,59 @@ def compare_levels(runs: dict[int, dict]) -> dict:
                       "same_count": len(set(counts.values())) == 1,
                       "fronts": {str(lv): [{k: e[k] for k in ("count", "realizable_pose_error_rel", "source")}
                                            for e in rows[lv][name]["front"]] for lv in levels}})
+        cases[-1]["agreement"] = agreement(cases[-1], {str(lv): rows[lv][name].get("planted_as_built_error_rel")
+                                                       for lv in levels})
     budget = (runs[levels[0]].get("consolidation") or {}).get("budget") if levels else None
     return {"levels": levels, "cases": cases, "same_count": sum(c["same_count"] for c in cases),
+            "errors_agree": sum(c["agreement"]["agree"] for c in cases),
             "budget": budget or 0.005, "totals": {str(lv): runs[lv]["totals"] for lv in levels}}
 
 
+def agreement(case: dict, planted: dict[str, float | None]) -> dict:
+    """Whether a case's front errors agree across levels (module docstring):
+    ``planted_errors`` (the planted tendons' as-built error per level) and their
+    ``planted_spread`` (None if one could not be solved), and per count k up to
+    planted + 1 its ``errors`` per level (None where that level's front stops
+    below k), ``spread``, ``window`` and ``agree``; ``agree`` holds when every
+    count the levels share agrees, ``compared`` lists those counts."""
+    known = [e for e in planted.values() if e is not None]
+    planted_spread = max(known) - min(known) if known and len(known) == len(planted) else None
+    counts = {}
+    for k in range(1, case["planted_count"] + 2):
+        errors = {lv: next((e["realizable_pose_error_rel"] for e in front if e["count"] == k), None)
+                  for lv, front in case["fronts"].items()}
+        row = {"errors": errors}
+        if all(e is not None for e in errors.values()):
+            spread = max(errors.values()) - min(errors.values())
+            window = max(AGREE_ABS, AGREE_REL * max(errors.values()))
+            if planted_spread is not None and planted_spread > window:
+                window = planted_spread + AGREE_SLACK
+            row.update(spread=spread, window=window, agree=bool(spread <= window))
+        counts[str(k)] = row
+    compared = [int(k) for k, r in counts.items() if "agree" in r]
+    return {"planted_errors": planted, "planted_spread": planted_spread, "counts": counts, "compared": compared,
+            "agree": all(counts[str(k)]["agree"] for k in compared)}
+
+
 def table(result: dict) -> list[str]:
-    """Per case the recommended count at each level, and whether it is the same."""
+    """Per case the recommended count at each level, whether it is the same, and
+    whether the front's errors agree (the widest spread over the counts compared,
+    and the planted tendons' own spread, % of L)."""
     levels = result["levels"]
-    out = [f"{'case':<26} {'planted':>7} " + " ".join(f"{f'level {lv}':>8}" for lv in levels) + "  same"]
+    out = [f"{'case':<26} {'planted':>7} " + " ".join(f"{f'level {lv}':>8}" for lv in levels)
+           + "  same  errors  widest spread  planted spread"]
     for c in result["cases"]:
+        a = c["agreement"]
+        spreads = [a["counts"][str(k)]["spread"] for k in a["compared"]]
+        widest = f"{100 * max(spreads):.3f}%" if spreads else "-"
+        planted = "-" if a["planted_spread"] is None else f"{100 * a['planted_spread']:.3f}%"
         out.append(f"{c['case']:<26} {c['planted_count']:>7} "
-                   + " ".join(f"{c['counts'][str(lv)]:>8}" for lv in levels) + f"  {'yes' if c['same_count'] else 'no'}")
-    out.append(f"the same recommended count at every level in {result['same_count']} of {len(result['cases'])} cases")
+                   + " ".join(f"{c['counts'][str(lv)]:>8}" for lv in levels)
+                   + f"  {'yes' if c['same_count'] else 'no':>4}  {'agree' if a['agree'] else 'differ':>6}"
+                   + f"  {widest:>13}  {planted:>14}")
+    n = len(result["cases"])
+    out.append(f"the same recommended count at every level in {result['same_count']} of {n} cases; the front's "
+               f"errors agree up to planted + 1 tendons in {result['errors_agree']} of {n}")
     return out
 
 
