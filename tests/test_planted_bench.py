@@ -59,6 +59,27 @@ def test_planted_figures_score_the_planted_tendons_with_the_same_friction():
     assert rough["planted_kinks"] == bare["planted_kinks"] == 0
 
 
+def test_a_planted_layout_of_several_poses_is_scored_from_each_pose_s_contractions():
+    """Each pose starts from its own planted contractions: at the level it was planted
+    at, the planted tendons reach both poses' goals exactly without friction, and
+    within 0.5 % of L with the scene's (started from the first pose's ratios for
+    both poses, the frictional soft IK stopped at 3.3 %)."""
+    from tendon_taichi import build_problem, load_scene
+    from tendon_taichi.planted.bench import planted_ratios
+
+    name = "snake_planted_2t_s2_2p"
+    layout = json.loads((SUITE / f"{name}.json").read_text())
+    ratios = planted_ratios(layout, 2)
+    assert ratios.tolist() == [p["contraction_ratios"] for p in layout["poses"]] and ratios[0, 0] != ratios[1, 0]
+    assert planted_ratios({"tendons": layout["tendons"]}, 2).tolist() == [
+        [t["contraction_ratio"] for t in layout["tendons"]]] * 2
+    scene = load_scene(str(SUITE / f"{name}.toml"))
+    assert scene.tendons.friction == 0.1
+    bare = planted_figures(build_problem(scene.with_tendons(friction=0.0), layout["level"]), layout)
+    rough = planted_figures(build_problem(scene, layout["level"]), layout)
+    assert bare["planted_as_built_error_rel"] < 1e-5 and rough["planted_as_built_error_rel"] < 0.005
+
+
 def test_the_checked_in_suite_loads():
     cases = load_suite(SUITE)
     assert len(cases) >= 12

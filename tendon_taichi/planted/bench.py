@@ -95,24 +95,33 @@ def load_suite(directory: str | Path) -> list[Case]:
     return cases
 
 
+def planted_ratios(layout: dict, n_poses: int) -> np.ndarray:
+    """The planted contraction ratios, (n_poses, T): each pose's own where the
+    layout has ``poses``, else every tendon's ``contraction_ratio`` for all."""
+    poses = layout.get("poses") or []
+    if len(poses) == n_poses and all("contraction_ratios" in p for p in poses):
+        return np.array([[float(r) for r in p["contraction_ratios"]] for p in poses])
+    ratios = np.array([float(t.get("contraction_ratio", 0.05)) for t in layout["tendons"]])
+    return np.tile(ratios, (n_poses, 1))
+
+
 def planted_figures(problem: Problem, layout: dict, solver: str = "auto") -> dict:
     """The planted tendons scored as a design is, with the scene's friction:
     ``planted_capstan_worst``, ``planted_kinks``, ``planted_total_turning`` (rad) and
     ``planted_as_built_error_rel``, their own contractions re-solved with friction
-    (None if that robot cannot be solved)."""
+    from the planted ones (:func:`planted_ratios`; None if that robot cannot be solved)."""
     mu = problem.scene.tendons.friction
     paths = [np.asarray(t["waypoints"], dtype=float) for t in layout["tendons"]]
     turns = [turn_angles(w) for w in paths]
     theta = [float(t.sum()) for t in turns]
     tendons = [Tendon(np.zeros(0, np.int64), np.zeros(0, np.int64), w, float(t.get("tension", 0.0)), 0.0)
                for w, t in zip(paths, layout["tendons"])]
-    ratios = np.array([float(t.get("contraction_ratio", 0.05)) for t in layout["tendons"]])
     state = IdealizedState(np.zeros(problem.fibers.n_fibers), np.zeros(problem.fibers.n_fibers), None, 0.0)
     if problem.n_poses > 1:
         state.poses = [state] * problem.n_poses
     try:
         real = solve_realizable_poses(problem, tendons, state, problem.scene.optimize, solver,
-                                      np.tile(ratios, (problem.n_poses, 1)))
+                                      planted_ratios(layout, problem.n_poses))
         error = real.pose_error_rel
     except ConvergenceError:
         error = None
