@@ -227,8 +227,9 @@ def run_case(scene: Scene, level: int, solver: str, extractors: tuple[str, ...],
              consolidation: dict | None = None, front: dict | None = None) -> dict:
     """Design ``scene`` at ``level`` with ``extractors`` (and the fields of
     :class:`~tendon_taichi.extract.settings.ConsolidationSettings` given in
-    ``consolidation``, the front's ``beam`` and ``converge`` in ``front``) into ``case_dir`` (``run.rrd``, ``run.npz``, ``design.json``,
-    ``design.svg``, ``optimize.json``, ``compare.json``). Returns the case's
+    ``consolidation``, the front's ``beam`` and ``converge`` in ``front``) into
+    ``case_dir`` (``run.rrd``, ``run.npz``, ``design.json``, ``design.svg``,
+    ``optimize.json``, ``compare.json``). Returns the case's
     figures: ``optimize`` (the final stage), ``extract`` (per extractor its
     metrics, or its error), ``design`` (the recommended design's count, source
     and figures), ``stages``."""

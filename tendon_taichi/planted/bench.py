@@ -37,10 +37,10 @@ from ..body.problem import Problem
 from ..body.scene import load_scene, with_overrides
 from ..errors import ConvergenceError, InputError, Stopped
 from ..extract.consolidation import ConsolidationSettings
-from ..extract.settings import FRONT_DEFAULTS
 from ..extract.plugins import available_extractors
 from ..extract.protocol import IdealizedState, Tendon, turn_angles
 from ..extract.realizable import solve_realizable_poses
+from ..extract.settings import FRONT_DEFAULTS
 from ..files import atomic_path, file_stem, write_json
 from ..io.progress import Progress
 from ..tasks.engine import Task, case_id, run_tasks
