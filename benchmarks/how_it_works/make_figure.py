@@ -21,7 +21,7 @@ from types import SimpleNamespace
 from tendon_taichi import load_scene
 from tendon_taichi.apps.case import run_case
 from tendon_taichi.body.scene import with_overrides
-from tendon_taichi.extract.settings import BEAM
+from tendon_taichi.cli.tendons import add_front_flags, front_settings
 from tendon_taichi.io.plots import plot_story
 
 HERE = Path(__file__).resolve().parent
@@ -35,14 +35,13 @@ def main():
     ap.add_argument("--out", type=Path, default=HERE / "how_it_works.png")
     ap.add_argument("--stage-iterations", type=int)
     ap.add_argument("--k-min", type=float)
-    ap.add_argument("--beam", type=int, default=BEAM, help=f"the front's beam width (default {BEAM})")
-    ap.add_argument("--no-converge", action="store_true", help="the front's errors on the design's own mesh")
+    add_front_flags(ap)
     args = ap.parse_args()
     layout = json.loads((SUITE / f"{args.case}.json").read_text())
     scene = with_overrides(load_scene(SUITE / f"{args.case}.toml"),
                            {"stage_iterations": args.stage_iterations, "k_min": args.k_min})
     with tempfile.TemporaryDirectory() as tmp:
-        design = run_case(scene, args.level, Path(tmp) / "design", beam=args.beam, converge=not args.no_converge)
+        design = run_case(scene, args.level, Path(tmp) / "design", **front_settings(args))
     run, rec = design.run, design.summary["recommended"]
     s0, final = run.stages[0], run.stages[-1]
     shown = SimpleNamespace(name=f"design, from {rec['source']}", metrics=rec["metrics"],

@@ -5,9 +5,9 @@ Usage: python benchmarks/planted_results/make_results.py [--levels 1 2 3] [--out
 
 For each level, runs `tendon-taichi planted-bench benchmarks/planted --resolution
 LEVEL --out RUNS/rLEVEL` (default settings, or the [optimize] settings given by
---set and the front's --beam and --no-converge; finished cases in RUNS are reused), then writes into DIR (default: this
-folder) planted_bench_level<LEVEL>.csv, gallery_level<LEVEL>.png,
-counts_by_level.md (benchmarks/planted/counts_by_level.py's table) and
+--set and the front's --beam and --no-converge; finished cases in RUNS are
+reused), then writes into DIR (default: this folder)
+planted_bench_level<LEVEL>.csv, gallery_level<LEVEL>.png, counts_by_level.md (benchmarks/planted/counts_by_level.py's table) and
 worst_cases.png (the three worst results over every level run) and README.md,
 the results page: per level the suite's figures, per case its figures at
 every level, and the commit that made them. The default run (levels
@@ -21,7 +21,7 @@ import sys
 import tomllib
 from pathlib import Path
 
-from tendon_taichi.extract.settings import BEAM
+from tendon_taichi.cli.tendons import add_front_flags, front_settings
 from tendon_taichi.planted.bench import load_suite, route_rule, run_suite
 from tendon_taichi.planted.gallery import gallery_figure
 from tendon_taichi.version import provenance
@@ -143,10 +143,9 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--cases", nargs="+")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="an [optimize] setting")
-    ap.add_argument("--beam", type=int, default=BEAM, help=f"the front's beam width (default {BEAM})")
-    ap.add_argument("--no-converge", action="store_true", help="the front's errors on each level's own mesh")
+    add_front_flags(ap)
     args = ap.parse_args(argv)
-    front = {"beam": args.beam, "converge": not args.no_converge}
+    front = front_settings(args)
     overrides = dict(_setting(s) for s in args.set)
     runs = []
     for level in args.levels:

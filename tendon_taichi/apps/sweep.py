@@ -30,7 +30,7 @@ from pathlib import Path
 from ..body.scene import Scene, load_scene, with_overrides
 from ..errors import InputError, Stopped
 from ..extract.plugins import available_extractors
-from ..extract.settings import BUDGET, FRONT_DEFAULTS, ConsolidationSettings
+from ..extract.settings import BUDGET, FRONT_DEFAULTS, ConsolidationSettings, front_id
 from ..files import atomic_path, write_json
 from ..io.plots import plot_sweep
 from ..io.progress import Progress
@@ -150,7 +150,6 @@ def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None,
         _fail(origin, f"'{key}' is both in [grid] and in [set]")
     consolidation = _consolidation(doc.get("consolidation", {}), origin)
     front = _front(doc.get("front", {}), origin)
-    changed = {k: v for k, v in front.items() if v != FRONT_DEFAULTS[k]}  # the defaults keep earlier runs' ids
     loaded = [_scene(s, base, origin) for s in scenes]
     given = {k: v for k, v in (tendons or {}).items() if v is not None}
     cases = []
@@ -164,7 +163,7 @@ def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None,
             sc = sc.with_tendons(**given)
             cid = case_id({"kind": "sweep-design", **_scene_digest(scene), "level": level, "settings": settings,
                            "tendons": given, "extractors": list(extractors), "solver": solver,
-                           "consolidation": consolidation, **({"front": changed} if changed else {})})
+                           "consolidation": consolidation, **front_id(front)})
             cases.append(SweepCase(cid, sc, level, settings, point))
     return Sweep(name, None, tuple(loaded), tuple(levels), tuple(extractors), solver, dict(grid), dict(fixed),
                  tuple(cases), consolidation, front)

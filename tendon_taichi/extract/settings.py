@@ -20,6 +20,14 @@ BEAM = 3
 FRONT_DEFAULTS = {"beam": BEAM, "converge": True}
 
 
+def front_id(front: dict) -> dict:
+    """What of the front's settings ``front`` goes into a case's id: those that
+    differ from :data:`FRONT_DEFAULTS`, as ``{"front": {...}}``, or nothing, so that
+    cases run before these settings existed keep their ids."""
+    changed = {k: v for k, v in front.items() if v != FRONT_DEFAULTS[k]}
+    return {"front": changed} if changed else {}
+
+
 @dataclass(frozen=True)
 class ConsolidationSettings:
     """``tolerance``: allowed cumulative rise of the as-built pose error, as a

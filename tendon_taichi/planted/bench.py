@@ -40,7 +40,7 @@ from ..extract.consolidation import ConsolidationSettings
 from ..extract.plugins import available_extractors
 from ..extract.protocol import IdealizedState, Tendon, turn_angles
 from ..extract.realizable import solve_realizable_poses
-from ..extract.settings import FRONT_DEFAULTS
+from ..extract.settings import FRONT_DEFAULTS, front_id
 from ..files import atomic_path, file_stem, write_json
 from ..io.progress import Progress
 from ..tasks.engine import Task, case_id, run_tasks
@@ -264,11 +264,10 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
     names = sorted(extractors or available_extractors())
     cons = dataclasses.asdict(consolidation or ConsolidationSettings())
     search = {**FRONT_DEFAULTS, **(front or {})}
-    changed = {k: v for k, v in search.items() if v != FRONT_DEFAULTS[k]}  # the defaults keep earlier runs' ids
     out_dir = Path(out_dir)
     tasks = [Task(case_id({"kind": "planted-design", "scene": case.scene_path.read_text(), "layout": case.layout,
                            "level": level, "settings": overrides, "extractors": names, "solver": solver,
-                           "consolidation": cons, "tendons": tendons, **({"front": changed} if changed else {})}),
+                           "consolidation": cons, "tendons": tendons, **front_id(search)}),
                   case.name, run_case,
                   (str(case.scene_path), case.layout, level, str(out_dir / "cases"), overrides, names, solver,
                    cons, tendons, search))
