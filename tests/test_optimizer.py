@@ -245,3 +245,23 @@ def test_planted_layout_is_reached_sparsely(planted_runs, level):
     assert last.pose_error_rel <= 0.01
     assert s0.active_length >= 3 * last.active_length
     assert run.summary["final"]["active_length"] == last.active_length
+
+
+@pytest.mark.parametrize("solver", ["direct", "cg"])
+def test_a_stage_settled_where_it_is_reports_the_settled_state(solver):
+    """A stage that ends where it is (``settle``, the warm path of the realizable
+    robot) reports the state solved to the stage tolerance: the evaluation that
+    reads its figures does not move it by a prediction made at an earlier point."""
+    from tendon_taichi.optimizer.soft_ik import STATE_TOL
+
+    p = build_problem(load_scene("t_shape"), 1)
+    line = np.array([(0.045 - 0.005 * i, 0.075) for i in range(9)])
+    ik = SoftIK(p, p.scene.optimize, solver, cables=CableSet.polylines(p.mesh, [line], p.scene.fibers.stiffness))
+    ik.restart(np.array([0.02]))
+    ik.evaluate(np.array([0.05]))  # the last evaluation, at another point
+    ik.settle(np.array([0.08]))
+    ik.figures(np.array([0.08]))
+    ps = ik.poses[0]
+    ps.model.set_positions(ik.state()[0][0])
+    g = ps.model.gradient()[~p.fixed]
+    assert np.linalg.norm(g) <= STATE_TOL * ps.state_newton.force_scale

@@ -251,8 +251,11 @@ class SoftIK:
 
     def settle(self, r: np.ndarray) -> list[Equilibrium]:
         """Each pose's equilibrium at ``r`` solved to the stage-state tolerance from
-        where the poses are (not from rest)."""
+        where the poses are (not from rest). The next evaluation starts from these
+        states as they are: no prediction from an earlier point moves them."""
         self._last = None
+        for ps in self.poses:
+            ps.pred = None
         ac = self.split(np.asarray(r, dtype=float) * self.a0)
         return [ps.state_newton.solve(ac=ac[i]) for i, ps in enumerate(self.poses)]
 
