@@ -85,3 +85,58 @@ def test_on_a_finer_mesh_two_still_make_the_pose_and_the_front_stays_monotone(se
     assert all(b <= a + 1e-6 for a, b in zip(errors, errors[1:])), errors
     alone = converged_error(fine, front.layouts[2], pose_only_state(fine), p.scene.optimize, "direct")
     assert alone.pose_error_rel == pytest.approx(res[2].pose_error_rel, rel=1e-9)  # the same solve
+
+
+def test_one_tendon_is_searched_over_every_pooled_route_and_join(searched):
+    """Counts 1 and 2 are searched over the whole pool: k = 1 over each pooled route
+    alone and each join of two, k = 2 over each pair; no pooled route alone, solved
+    in full, does better than the front's one-tendon layout."""
+    from dataclasses import replace
+
+    from tendon_taichi.extract.consolidation import _Search, route_settings
+    from tendon_taichi.extract.front import JOIN_GAP, pooled_candidates
+
+    p, st, _, front = searched
+    wide = replace(OPTIONS, gap=max(OPTIONS.gap, JOIN_GAP))
+    search = _Search(p, st, p.scene.optimize, "direct", wide, route_settings(p, OPTIONS), "test", None)
+    n = len(front.routes)
+    ones = pooled_candidates(search, front.routes, 1)
+    assert [c.action for c in ones[:n]] == ["route"] * n and [c.ids for c in ones[:n]] == [(i,) for i in range(n)]
+    assert len(ones) > n and all(c.action == "join" and len(c.routes) == 1 for c in ones[n:])
+    pairs = pooled_candidates(search, front.routes, 2)
+    assert sorted(c.ids for c in pairs) == [(i, j) for i in range(n) for j in range(i + 1, n)]
+    alone = [search.solve(c.routes, c.start) for c in ones[:n]]
+    assert front.layouts[1].cost <= min(lay.cost for lay in alone if lay is not None) * (1 + 1e-9)
+
+
+def test_the_exhaustive_search_adds_to_the_beam_and_takes_nothing_from_it(searched, monkeypatch):
+    """The pooled one-tendon layouts are finished beside the beam's, never in their
+    place: the one-tendon layout is at most as costly as the beam alone finds."""
+    import tendon_taichi.extract.front as front_module
+
+    p, st, greedy, front = searched
+    monkeypatch.setattr(front_module, "EXHAUSTIVE", 0)
+    beam_only = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
+    assert front.layouts[1].cost <= beam_only.layouts[1].cost * (1 + 1e-9)
+    assert front.screened > beam_only.screened
+
+
+def test_a_route_added_to_a_layout_starts_barely_taut(searched):
+    """The monotone repair's start: at the smaller layout's equilibrium, the added
+    route's contraction gives it the cubic zone's tension at strain eps / 4,
+    EA eps / 32 (the model's own tension, not the inverse formula)."""
+    from tendon_taichi import Model
+    from tendon_taichi.extract.consolidation import _Search, route_settings
+    from tendon_taichi.extract.front import _taut_ratios
+    from tendon_taichi.extract.realizable import tendon_cables
+
+    p, st, _, front = searched
+    below = front.layouts[1]
+    route = next(r for r in front.routes if not any(same_route(r, q, p.size) for q in below.routes))
+    search = _Search(p, st, p.scene.optimize, "direct", OPTIONS, route_settings(p, OPTIONS), "test", None)
+    ratio = _taut_ratios(search, route, below)
+    assert ratio.shape == (1, 1)
+    cables = tendon_cables(p, [route.tendon()])
+    tau = Model.from_problem(p, cables=cables).tensions_at(ratio[0] * cables.a0, below.realizable.x)
+    fs = p.scene.fibers
+    assert tau[0] == pytest.approx(fs.stiffness * fs.eps / 32, rel=1e-6)

@@ -15,6 +15,14 @@ tendons together:
   drop and smooth join (ends up to ``JOIN_GAP`` x L apart; screened by one
   Gauss-Newton step, the best solved in full), and the results compete with
   the seeds of the count below;
+* **exhaustive low counts**: for k up to ``EXHAUSTIVE``, every pooled route
+  alone and every smooth join of two (k = 1), every set of k pooled routes
+  (k > 1) are screened from the best layout of the count above and the best
+  solved in full; the ``beam`` best of them and the one of least pose error
+  join the beam's layouts of that count (beside them: the beam's path is the
+  same with or without them). Which
+  few routes a small layout keeps matters most, and where the beam's path from
+  the most tendons leads depends on the lattice;
 * **finish**: up to the first count within the budget, every layout the beam
   kept of that count is oriented and its routes optimized (control points,
   ends and contractions; ``refine`` rounds), and the least costly is the
@@ -34,6 +42,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from itertools import combinations
 from typing import Callable
 
 import numpy as np
@@ -41,9 +50,9 @@ import numpy as np
 from ..body.problem import Problem
 from ..errors import ConvergenceError
 from ..objective.settings import OptimizeSettings
-from .consolidation import Candidate, Consolidation, Layout, _Search, route_settings
+from .consolidation import Candidate, Consolidation, Layout, _Search, positions, route_settings
 from .protocol import IdealizedState
-from .realizable import RealizableResult, solve_realizable_poses
+from .realizable import RealizableResult, solve_realizable_poses, warm_ratios
 from .routes import Route, resample
 from .settings import BEAM, ConsolidationSettings
 
@@ -53,6 +62,12 @@ from .settings import BEAM, ConsolidationSettings
 JOIN_GAP = 0.5
 #: the as-built soft IK's precision (x L): errors closer than this are equal
 PRECISION = 1e-6
+#: counts up to this are also searched exhaustively over the pool (:func:`pooled_candidates`)
+EXHAUSTIVE = 2
+#: a route added to a solved layout starts barely taut, at strain TAUT x eps (the unilateral
+#: energy's cubic zone, a tension of EA eps TAUT^2 / 2) at that layout's equilibria: the soft IK
+#: starts where the smaller layout ended, and the route's tension still has a gradient there
+TAUT = 0.25
 #: two routes closer than this (mean distance between their resampled polylines, x L) are one route
 SAME_ROUTE = 0.02
 
@@ -154,19 +169,27 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
         return front
     top = max(by_count)
     say(f"front: beam search from {top} tendon(s), {front.seeds} seed layouts, {len(pool)} distinct routes")
+    exhaustive: dict[int, list[Layout]] = {}
     for k in range(top, 0, -1):
         by_count[k] = _best(by_count.get(k, []), beam, size)
+        near = (by_count.get(k + 1) or by_count[k] or [None])[0]
+        if k <= EXHAUSTIVE and near is not None:
+            exhaustive[k] = _kept(_exhaustive(search, pool, k, near), beam, size)
         if k == 1:
             break
         for lay in by_count[k]:
             reduced = [replace(r, source=sources(r.routes)) for _, r in search.ranked(search.reductions(lay), lay)]
             by_count.setdefault(k - 1, []).extend(reduced[:beam])
+    for k, found in exhaustive.items():  # beside the beam's layouts, never in their place
+        kept = {_key(lay, size) for lay in by_count[k]}
+        by_count[k] = by_count[k] + [lay for lay in found if _key(lay, size) not in kept]
     counts = [k for k in sorted(by_count) if by_count[k] and (max_tendons is None or k <= max_tendons)]
     within = False
     for k in counts:
-        # up to the first count within the budget, every layout the beam kept is finished (route
-        # optimization can reorder them: a join often gains most); above it, the best, one round
-        members = by_count[k][:1] if within else by_count[k]
+        # up to the first count within the budget, every layout the beam kept (and the exhaustive
+        # search found) is finished - route optimization can reorder them: a join often gains
+        # most; above it, the best, one round
+        members = _best(by_count[k], 1, size) if within else by_count[k]
         say(f"front: optimizing the routes of the {'best' if len(members) == 1 else len(members)} "
             f"{k}-tendon layout{'s' if len(members) > 1 else ''}")
         lay = min((_finished(search, m, 1 if within else options.refine) for m in members), key=lambda m: m.cost)
@@ -178,6 +201,46 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
     front.time_s = time.perf_counter() - t0
     return front
+
+
+def pooled_candidates(search: _Search, pool: list[Route], k: int) -> list[Candidate]:
+    """Every layout of ``k`` routes from the pool: for k = 1 each pooled route
+    alone ('route') and each smooth join of two within the search's gap ('join'),
+    for k > 1 each set of k pooled routes ('set'); each to start from the
+    contractions that give its routes their strands' tensions in every pose."""
+    P = search.problem.n_poses
+
+    def cand(action: str, ids: tuple[int, ...], routes: list[Route]) -> Candidate:
+        tensions = np.tile([r.tension for r in routes], (P, 1))
+        return Candidate(action, ids, routes, search.start_ratios(routes, tensions))
+
+    if k > 1:
+        return [cand("set", ids, [pool[i] for i in ids]) for ids in combinations(range(len(pool)), k)]
+    reach, clearance = search.options.gap * search.problem.size, search.rs.clearance
+    out = [cand("route", (i,), [r]) for i, r in enumerate(pool)]
+    for i, j in combinations(range(len(pool)), 2):
+        out += [cand("join", (i, j), [joined]) for joined in search.joins(pool[i], pool[j], reach, clearance)]
+    return out
+
+
+def _exhaustive(search: _Search, pool: list[Route], k: int, near: Layout) -> list[Layout]:
+    """The pooled layouts of ``k`` routes (:func:`pooled_candidates`), screened by
+    one Gauss-Newton step from ``near``'s equilibria, the best solved in full."""
+    cands = pooled_candidates(search, pool, k)
+    search.log(f"front: {len(cands)} {k}-tendon layout(s) from the {len(pool)} pooled routes")
+    ranked = search.ranked(cands, near)
+    return [replace(lay, source=sources(lay.routes)) for _, lay in ranked]
+
+
+def _kept(layouts: list[Layout], n: int, size: float) -> list[Layout]:
+    """The ``n`` least costly distinct layouts, and the one of least pose error
+    besides: a fresh join's shape cost is that of a rough fit, which route
+    optimization smooths away, and its pose error shows better what it can do."""
+    out = _best(layouts, n, size)
+    closest = min(layouts, key=lambda lay: lay.error, default=None)
+    if closest is not None and _key(closest, size) not in {_key(lay, size) for lay in out}:
+        out.append(closest)
+    return out
 
 
 def _finished(search: _Search, layout: Layout, rounds: int) -> Layout:
@@ -205,24 +268,39 @@ def _pooled(search: _Search, consolidations: list[Consolidation], size: float) -
     return None if lay is None else replace(lay, source=sources(routes))
 
 
-def _with_one_more(search: _Search, below: Layout, pool: list[Route], size: float, n: int) -> list[Layout]:
+def _taut_ratios(search: _Search, route: Route, below: Layout) -> np.ndarray:
+    """Contractions (P, 1) that leave ``route`` barely taut in each pose of the
+    solved layout ``below`` (strain ``TAUT`` x eps at its equilibria)."""
+    fs = search.problem.scene.fibers
+    tension = 0.5 * fs.stiffness * fs.eps * TAUT ** 2  # the cubic zone's tension at strain TAUT x eps
+    states = search.state.poses or [search.state]
+    return np.array([warm_ratios(search.problem, [route.tendon()], replace(st, x=x), [tension])
+                     for st, x in zip(states, positions(below.realizable))])
+
+
+def _with_one_more(search: _Search, below: Layout, pool: list[Route], size: float, n: int,
+                   taut: bool) -> list[Layout]:
     """The layout ``below`` with one more pooled route it lacks: the ``n`` least
     costly (screened by one Gauss-Newton step, then solved in full from
-    ``below``'s contractions and equilibria)."""
+    ``below``'s contractions and equilibria), the new route starting barely taut
+    (``taut``, :func:`_taut_ratios`: the soft IK starts where ``below`` ended) or
+    at its strand's tension (it does its share of the work from the start, and
+    can reach an optimum far from ``below``'s)."""
     start = np.atleast_2d(below.realizable.ratios).reshape(search.problem.n_poses, -1)
     cands = []
     for r in pool:
         if not any(same_route(r, q, size) for q in below.routes):
-            add = search.start_ratios([r], np.full((search.problem.n_poses, 1), r.tension))
+            add = (_taut_ratios(search, r, below) if taut else
+                   search.start_ratios([r], np.full((search.problem.n_poses, 1), r.tension)))
             cands.append(Candidate("add", (), below.routes + [r], np.concatenate([start, add], axis=1)))
     return [replace(lay, source=sources(lay.routes)) for _, lay in search.ranked(cands, below)[:n]]
 
 
 def _one_more(search: _Search, below: Layout, pool: list[Route], now: Layout, size: float) -> Layout:
-    """The better (as built) of ``now`` and the best layout ``below`` (one tendon
-    fewer) with one more pooled route."""
-    more = _with_one_more(search, below, pool, size, 1)
-    return more[0] if more and more[0].error < now.error else now
+    """The best (as built) of ``now`` and the best layout ``below`` (one tendon
+    fewer) with one more pooled route, from either start."""
+    more = [lay for taut in (True, False) for lay in _with_one_more(search, below, pool, size, 1, taut)]
+    return min([now] + more, key=lambda lay: lay.error)
 
 
 def pose_only_state(problem: Problem) -> IdealizedState:
@@ -249,9 +327,10 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
     """Each front layout's as-built robot on the finer mesh ``fine``
     (:func:`converged_error`; None where it cannot be solved), kept monotone there:
     where a count's error is above the count below's by more than ``PRECISION``,
-    that smaller layout with one more pooled route (the two best on ``problem``'s
-    mesh) is solved on ``fine`` as well and replaces the front's layout when it
-    does better there."""
+    that smaller layout with one more pooled route (the best on ``problem``'s mesh
+    from each start of :func:`_with_one_more`, where that keeps the front on
+    ``problem``'s mesh monotone) is solved on ``fine`` as well and replaces the
+    front's layout when it does better there."""
     fine_state = pose_only_state(fine)
     search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
     search.out = Consolidation(next(iter(front.layouts.values())), 0, 0.0)
@@ -267,7 +346,10 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
         res = solve(front.layouts[k])
         below = out.get(k - 1)
         if below is not None and (res is None or res.pose_error_rel > below.pose_error_rel + PRECISION):
-            for lay in _with_one_more(search, front.layouts[k - 1], front.routes, problem.size, 2):
+            smaller = front.layouts[k - 1]
+            for lay in [m for taut in (True, False) for m in _with_one_more(search, smaller, front.routes,
+                                                                            problem.size, 1, taut)
+                        if m.error <= max(smaller.error, front.layouts[k].error) + PRECISION]:
                 start = np.concatenate([np.atleast_2d(below.ratios).reshape(fine.n_poses, -1),
                                         np.atleast_2d(lay.realizable.ratios).reshape(fine.n_poses, -1)[:, -1:]],
                                        axis=1)
