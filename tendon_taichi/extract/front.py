@@ -23,8 +23,8 @@ tendons together:
   same with or without them). Which
   few routes a small layout keeps matters most, and where the beam's path from
   the most tendons leads depends on the lattice;
-* **finish**: up to the first count within the budget, every layout the beam
-  kept of that count is oriented and its routes optimized (control points,
+* **finish**: up to the first count within the budget, every layout kept of
+  that count (the beam's and the exhaustive search's) is oriented and its routes optimized (control points,
   ends and contractions; ``refine`` rounds), and the least costly is the
   count's; above it, only the best, one round;
 * **monotone**: where a count's layout has a larger as-built error than the one
