@@ -7,8 +7,9 @@ For each level, runs `tendon-taichi planted-bench benchmarks/planted --resolutio
 LEVEL --out RUNS/rLEVEL` (default settings, or the [optimize] settings given by
 --set and the front's --beam and --no-converge; finished cases in RUNS are
 reused), then writes into DIR (default: this folder)
-planted_bench_level<LEVEL>.csv, gallery_level<LEVEL>.png, counts_by_level.md (benchmarks/planted/counts_by_level.py's table) and
-worst_cases.png (the three worst results over every level run) and README.md,
+planted_bench_level<LEVEL>.csv, gallery_level<LEVEL>.png, counts_by_level.md
+(benchmarks/planted/counts_by_level.py's table) and worst_cases.png (the three
+worst results over every level run) and README.md,
 the results page: per level the suite's figures, per case its figures at
 every level, and the commit that made them. The default run (levels
 1-3, 16 cases) takes a few hours on 2 cores.

@@ -218,10 +218,13 @@ class _Search:
             return None
         return Layout(routes, real, self.cost(routes, real.pose_error_rel), self.source)
 
-    def start_ratios(self, routes: list[Route], tensions: np.ndarray) -> np.ndarray:
-        """Contractions (P, T) that give each route its tension in each pose, ``tensions`` (P, T) N."""
+    def start_ratios(self, routes: list[Route], tensions: np.ndarray, at: list[np.ndarray] | None = None) -> np.ndarray:
+        """Contractions (P, T) that give each route its tension in each pose, ``tensions``
+        (P, T) N, at the idealized equilibria or at each pose's positions ``at`` (n, 2)."""
         tendons = [r.tendon() for r in routes]
         states = self.state.poses or [self.state]
+        if at is not None:
+            states = [replace(st, x=x) for st, x in zip(states, at)]
         return np.array([warm_ratios(self.problem, tendons, st, t) for st, t in zip(states, tensions)])
 
     def ranked(self, candidates: list[Candidate], now: Layout) -> list[tuple[Candidate, Layout]]:

@@ -20,13 +20,13 @@ tendons together:
   (k > 1) are screened from the best layout of the count above and the best
   solved in full; the ``beam`` best of them and the one of least pose error
   join the beam's layouts of that count (beside them: the beam's path is the
-  same with or without them). Which
-  few routes a small layout keeps matters most, and where the beam's path from
-  the most tendons leads depends on the lattice;
+  same with or without them). Which few routes a small layout keeps matters
+  most, and where the beam's path from the most tendons leads depends on the
+  lattice;
 * **finish**: up to the first count within the budget, every layout kept of
-  that count (the beam's and the exhaustive search's) is oriented and its routes optimized (control points,
-  ends and contractions; ``refine`` rounds), and the least costly is the
-  count's; above it, only the best, one round;
+  that count (the beam's and the exhaustive search's) is oriented and its
+  routes optimized (control points, ends and contractions; ``refine`` rounds),
+  and the least costly is the count's; above it, only the best, one round;
 * **monotone**: where a count's layout has a larger as-built error than the one
   below (by more than the soft IK's precision, ``PRECISION``), the smaller
   layout with one more pooled route added is solved and kept when it does
@@ -52,7 +52,7 @@ from ..errors import ConvergenceError
 from ..objective.settings import OptimizeSettings
 from .consolidation import Candidate, Consolidation, Layout, _Search, positions, route_settings
 from .protocol import IdealizedState
-from .realizable import RealizableResult, solve_realizable_poses, warm_ratios
+from .realizable import RealizableResult, solve_realizable_poses
 from .routes import Route, resample
 from .settings import BEAM, ConsolidationSettings
 
@@ -172,9 +172,9 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
     exhaustive: dict[int, list[Layout]] = {}
     for k in range(top, 0, -1):
         by_count[k] = _best(by_count.get(k, []), beam, size)
-        near = (by_count.get(k + 1) or by_count[k] or [None])[0]
-        if k <= EXHAUSTIVE and near is not None:
-            exhaustive[k] = _kept(_exhaustive(search, pool, k, near), beam, size)
+        near = by_count.get(k + 1) or by_count[k]  # the layout the screen linearizes at: its first
+        if k <= EXHAUSTIVE and near:
+            exhaustive[k] = _kept(_exhaustive(search, pool, k, near[0]), beam, size)
         if k == 1:
             break
         for lay in by_count[k]:
@@ -273,34 +273,35 @@ def _taut_ratios(search: _Search, route: Route, below: Layout) -> np.ndarray:
     solved layout ``below`` (strain ``TAUT`` x eps at its equilibria)."""
     fs = search.problem.scene.fibers
     tension = 0.5 * fs.stiffness * fs.eps * TAUT ** 2  # the cubic zone's tension at strain TAUT x eps
-    states = search.state.poses or [search.state]
-    return np.array([warm_ratios(search.problem, [route.tendon()], replace(st, x=x), [tension])
-                     for st, x in zip(states, positions(below.realizable))])
+    return search.start_ratios([route], np.full((search.problem.n_poses, 1), tension), positions(below.realizable))
 
 
-def _with_one_more(search: _Search, below: Layout, pool: list[Route], size: float, n: int,
-                   taut: bool) -> list[Layout]:
-    """The layout ``below`` with one more pooled route it lacks: the ``n`` least
-    costly (screened by one Gauss-Newton step, then solved in full from
-    ``below``'s contractions and equilibria), the new route starting barely taut
-    (``taut``, :func:`_taut_ratios`: the soft IK starts where ``below`` ended) or
-    at its strand's tension (it does its share of the work from the start, and
-    can reach an optimum far from ``below``'s)."""
-    start = np.atleast_2d(below.realizable.ratios).reshape(search.problem.n_poses, -1)
-    cands = []
-    for r in pool:
-        if not any(same_route(r, q, size) for q in below.routes):
-            add = (_taut_ratios(search, r, below) if taut else
-                   search.start_ratios([r], np.full((search.problem.n_poses, 1), r.tension)))
-            cands.append(Candidate("add", (), below.routes + [r], np.concatenate([start, add], axis=1)))
-    return [replace(lay, source=sources(lay.routes)) for _, lay in search.ranked(cands, below)[:n]]
+def _with_one_more(search: _Search, below: Layout, pool: list[Route], size: float) -> list[Layout]:
+    """The layout ``below`` with one more pooled route it lacks, solved from
+    ``below``'s contractions and equilibria: the least costly (screened by one
+    Gauss-Newton step, then solved in full) with the new route starting barely
+    taut (:func:`_taut_ratios`: the soft IK starts where ``below`` ended), and the
+    least costly with it starting at its strand's tension (it does its share of
+    the work from the start, and can reach an optimum far from ``below``'s)."""
+    P = search.problem.n_poses
+    start = np.atleast_2d(below.realizable.ratios).reshape(P, -1)
+    lacking = [r for r in pool if not any(same_route(r, q, size) for q in below.routes)]
+
+    def added(r: Route, taut: bool) -> np.ndarray:
+        return _taut_ratios(search, r, below) if taut else search.start_ratios([r], np.full((P, 1), r.tension))
+
+    out = []
+    for taut in (True, False):
+        cands = [Candidate("add", (), below.routes + [r], np.concatenate([start, added(r, taut)], axis=1))
+                 for r in lacking]
+        out += [replace(lay, source=sources(lay.routes)) for _, lay in search.ranked(cands, below)[:1]]
+    return out
 
 
 def _one_more(search: _Search, below: Layout, pool: list[Route], now: Layout, size: float) -> Layout:
-    """The best (as built) of ``now`` and the best layout ``below`` (one tendon
-    fewer) with one more pooled route, from either start."""
-    more = [lay for taut in (True, False) for lay in _with_one_more(search, below, pool, size, 1, taut)]
-    return min([now] + more, key=lambda lay: lay.error)
+    """The best (as built) of ``now`` and the layout ``below`` (one tendon fewer)
+    with one more pooled route (:func:`_with_one_more`)."""
+    return min([now] + _with_one_more(search, below, pool, size), key=lambda lay: lay.error)
 
 
 def pose_only_state(problem: Problem) -> IdealizedState:
@@ -328,7 +329,7 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
     (:func:`converged_error`; None where it cannot be solved), kept monotone there:
     where a count's error is above the count below's by more than ``PRECISION``,
     that smaller layout with one more pooled route (the best on ``problem``'s mesh
-    from each start of :func:`_with_one_more`, where that keeps the front on
+    from each start, :func:`_with_one_more`, where that keeps the front on
     ``problem``'s mesh monotone) is solved on ``fine`` as well and replaces the
     front's layout when it does better there."""
     fine_state = pose_only_state(fine)
@@ -347,8 +348,7 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
         below = out.get(k - 1)
         if below is not None and (res is None or res.pose_error_rel > below.pose_error_rel + PRECISION):
             smaller = front.layouts[k - 1]
-            for lay in [m for taut in (True, False) for m in _with_one_more(search, smaller, front.routes,
-                                                                            problem.size, 1, taut)
+            for lay in [m for m in _with_one_more(search, smaller, front.routes, problem.size)
                         if m.error <= max(smaller.error, front.layouts[k].error) + PRECISION]:
                 start = np.concatenate([np.atleast_2d(below.ratios).reshape(fine.n_poses, -1),
                                         np.atleast_2d(lay.realizable.ratios).reshape(fine.n_poses, -1)[:, -1:]],
