@@ -140,3 +140,70 @@ def test_a_route_added_to_a_layout_starts_barely_taut(searched):
     tau = Model.from_problem(p, cables=cables).tensions_at(ratio[0] * cables.a0, below.realizable.x)
     fs = p.scene.fibers
     assert tau[0] == pytest.approx(fs.stiffness * fs.eps / 32, rel=1e-6)
+
+
+def _with_a_slack_route(p, st, search, routes):
+    """``routes`` and a route across the T's arm that no contraction has pulled
+    taut (its contraction 0, its tension 0: a soft IK that starts it slack leaves
+    it there, its gradient is 0), solved from the routes' strand tensions."""
+    from tendon_taichi.extract.routes import fit_route
+
+    slack = fit_route(np.array([[-0.01, 0.07], [0.01, 0.07]]), p.size, 0.0, 0.0, "slack")
+    tensions = np.array([[r.tension for r in routes]])
+    start = np.concatenate([search.start_ratios(routes, tensions), [[0.0]]], axis=1)
+    return search.solve(routes + [slack], start)
+
+
+def test_a_slack_route_is_found_and_the_robot_without_it_is_the_same(searched):
+    from tendon_taichi.extract.consolidation import _Search, extracted_routes, route_settings
+    from tendon_taichi.extract.front import PRECISION, _without_slack, slack_routes
+
+    p, st, _, _ = searched
+    search = _Search(p, st, p.scene.optimize, "direct", OPTIONS, route_settings(p, OPTIONS), "test", None)
+    planted, _ = extracted_routes(p, _planted_tendons(p, st), st, search.rs.clearance)
+    three = _with_a_slack_route(p, st, search, planted)
+    assert three.count == 3 and slack_routes(three) == [2]
+    assert np.all(np.asarray(three.realizable.tau)[:2] > 0.1)  # the planted routes do the work
+    (two,) = _without_slack(search, three)
+    assert two.count == 2 and two.optimized and [r.source for r in two.routes] == [r.source for r in planted]
+    assert abs(two.error - three.error) < PRECISION
+    # the same contractions, to the soft IK's stopping rule (its steps from the same point stop anew)
+    np.testing.assert_allclose(two.realizable.ratios, np.asarray(three.realizable.ratios)[:2], rtol=1e-4)
+    assert slack_routes(two) == [] and _without_slack(search, two) == []
+
+
+def test_a_layout_with_a_slack_route_is_offered_at_its_working_count(searched, monkeypatch):
+    """When route optimization leaves a route slack, the robot without it competes
+    at the count below: here the two-tendon layouts finish as one planted route
+    and a slack one (the pose is out of reach), the three-tendon ones as both
+    planted routes and a slack one; the front's two-tendon entry is then both
+    planted routes, and the recommendation 2, not 3."""
+    from dataclasses import replace
+
+    import tendon_taichi.extract.front as front_module
+    from tendon_taichi.extract.consolidation import extracted_routes
+
+    p, st, greedy, _ = searched
+    real = front_module._finished
+
+    def finished(search, layout, rounds):
+        planted, _ = extracted_routes(p, _planted_tendons(p, st), st, search.rs.clearance)
+        if layout.count in (2, 3):
+            lay = _with_a_slack_route(p, st, search, planted[:layout.count - 1])
+            return replace(lay, optimized=True, source="test")
+        return real(search, layout, rounds)
+
+    monkeypatch.setattr(front_module, "_finished", finished)
+    front = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
+    assert front.layouts[3].count == 3 and front_module.slack_routes(front.layouts[3]) == [2]
+    assert front.layouts[2].error < 1e-3 and front_module.slack_routes(front.layouts[2]) == []
+    assert recommend(front_rows(front, None, 0.0, 30.0), 0.005)["count"] == 2
+
+
+def _planted_tendons(p, st):
+    """The two planted lines as tendons (the fixture's strands, in its order)."""
+    from test_consolidation import LINES, _tendons
+
+    from conftest import lattice_path
+
+    return _tendons(p, [lattice_path(p, [np.array(q) for q in line]) for line in LINES], st)

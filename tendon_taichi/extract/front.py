@@ -30,7 +30,11 @@ tendons together:
 * **monotone**: where a count's layout has a larger as-built error than the one
   below (by more than the soft IK's precision, ``PRECISION``), the smaller
   layout with one more pooled route added is solved and kept when it does
-  better - a tendon more never makes the best layout found worse.
+  better - a tendon more never makes the best layout found worse;
+* **slack routes**: a finished layout whose routes include slack ones (no
+  tension in any pose, :func:`slack_routes`) is the same robot without them,
+  and that smaller layout replaces the front's of its count when its as-built
+  error is lower.
 
 Because a greedy layout of each count is among the seeds, the front is never
 worse than greedy consolidation at any count (in effective error).
@@ -70,6 +74,8 @@ EXHAUSTIVE = 2
 TAUT = 0.25
 #: two routes closer than this (mean distance between their resampled polylines, x L) are one route
 SAME_ROUTE = 0.02
+#: a route whose tension is at most this fraction of its layout's largest, in every pose, is slack
+SLACK = 1e-6
 
 
 @dataclass
@@ -196,7 +202,13 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
         if k > 1 and k - 1 in front.layouts and lay.error > front.layouts[k - 1].error + PRECISION:
             lay = _one_more(search, front.layouts[k - 1], pool, lay, size)
         front.layouts[k] = lay
-        within = within or lay.error <= options.budget
+        for smaller in _without_slack(search, lay):  # the same robot with fewer tendons
+            held = front.layouts.get(smaller.count)
+            if held is None or smaller.error < held.error - PRECISION:
+                say(f"front: {lay.count - smaller.count} of the {lay.count} routes are slack; the rest make a "
+                    f"{smaller.count}-tendon layout of {100 * smaller.error:.2f}% of L")
+                front.layouts[smaller.count] = smaller
+        within = any(m.error <= options.budget for m in front.layouts.values())
     front.evaluations, front.screened = tally.evaluations, tally.screened
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
     front.time_s = time.perf_counter() - t0
@@ -240,6 +252,33 @@ def _kept(layouts: list[Layout], n: int, size: float) -> list[Layout]:
     closest = min(layouts, key=lambda lay: lay.error, default=None)
     if closest is not None and _key(closest, size) not in {_key(lay, size) for lay in out}:
         out.append(closest)
+    return out
+
+
+def slack_routes(layout: Layout) -> list[int]:
+    """The indices of a solved layout's routes that are slack - their tension in
+    every pose at most ``SLACK`` x the largest of the layout's: they do no work,
+    and the robot without them is the same."""
+    tau = np.asarray(layout.realizable.tau, dtype=float).reshape(-1, layout.count)  # (P, T) N at the pull ends
+    top = float(tau.max(initial=0.0))
+    return [i for i in range(layout.count) if top > 0.0 and tau[:, i].max() <= SLACK * top]
+
+
+def _without_slack(search: _Search, layout: Layout) -> list[Layout]:
+    """For d = 1 .. the number of its slack routes (:func:`slack_routes`), the
+    solved ``layout`` without the first d of them, solved again from its
+    contractions and equilibria (the same robot, d tendons fewer; counted as
+    finished: route optimization moved the routes left with the slack ones in
+    place, doing nothing); empty when none is slack."""
+    slack = slack_routes(layout)
+    start = np.atleast_2d(layout.realizable.ratios).reshape(search.problem.n_poses, -1)
+    out = []
+    for d in range(1, min(len(slack), layout.count - 1) + 1):
+        keep = [i for i in range(layout.count) if i not in slack[:d]]
+        routes = [layout.routes[i] for i in keep]
+        lay = search.solve(routes, start[:, keep], layout)
+        if lay is not None:
+            out.append(replace(lay, source=sources(routes), optimized=True))
     return out
 
 
