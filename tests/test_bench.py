@@ -44,6 +44,11 @@ def test_bench_writes_its_outputs(tmp_path, cli):
             assert f["newton_iterations"]["warm"] < f["newton_iterations"]["cold"]
             assert f["forward_vs_adjoint_rel_diff"] < 1e-6  # both give the same gradient
             assert f["peak_memory_mb"] > 0
+        base = lv["baseline_gradient_s"]
+        assert 0 < base["min"] <= base["median"] <= base["max"]
+        assert set(lv["gradient_speedup"]) == {"cg", "direct"}
+        for s, f in lv["solvers"].items():  # the baseline's time over the backend's, as reported
+            assert lv["gradient_speedup"][s] == base["median"] / f["gradient_s"]["median"]
     one = res["levels"][0]["solvers"]
     for s in ("cg", "direct"):
         assert one[s]["stages"] == 3 and one[s]["optimize_s"]["median"] > 0
@@ -51,6 +56,7 @@ def test_bench_writes_its_outputs(tmp_path, cli):
     assert "optimize_s" not in res["levels"][1]["solvers"]["cg"]
     rows = list(csv.DictReader(open(out / "bench.csv")))
     assert len(rows) == 4 and {r["solver"] for r in rows} == {"cg", "direct"}
+    assert all(float(r["gradient_speedup"]) > 0 for r in rows)
     assert (out / "bench.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     for s in ("cg", "direct"):
         assert np.isfinite(res["exponents"][s]["equilibrium_cold_s"])

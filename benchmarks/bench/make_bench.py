@@ -1,7 +1,7 @@
 """Regenerate the checked-in benchmark results: this folder's bench.json, bench.csv,
 bench.png and table.txt, and the performance page docs/performance.md.
 
-Usage: python benchmarks/bench/make_bench.py [--levels 1 2 3 4 5] [--repeat 3] [--out DIR]
+Usage: python benchmarks/bench/make_bench.py [--levels 1 2 3 4 5 6] [--repeat 3] [--out DIR]
        [--page FILE] [--optimize-levels N ... | --no-optimize]
        python benchmarks/bench/make_bench.py --page-only [--out DIR] [--page FILE]
 
@@ -12,9 +12,10 @@ the whole optimization with the backend ``--solver auto`` picks at each level
 optimization at those levels only), then writes DIR/table.txt and the page
 (the table, the fitted exponents, the plot, the optimization's quality per
 level, the machine and the commit that made it); ``--page-only`` writes
-table.txt and the page again from DIR/bench.json without measuring. Defaults: levels 1-5, 3
-repeats, this folder and docs/performance.md; the full run takes about half an
-hour on 2 cores.
+table.txt and the page again from DIR/bench.json without measuring. Defaults:
+levels 1-6 (the whole optimization at 1-5), 3 repeats, this folder and
+docs/performance.md; the full run takes about three quarters of an hour on 2
+cores.
 """
 
 import argparse
@@ -40,7 +41,11 @@ Per level and linear backend, in seconds (medians of the repeats, compiling the
 Taichi kernels excluded): `eq cold`, one equilibrium from rest; `eq warm`, one
 from the equilibrium of a design whose contraction ratios differ by +-0.5 %;
 `Newton` and `CG it`, iterations cold/warm; `adjoint`, one adjoint solve;
-`gradient`, one warm equilibrium plus the adjoint; `forward`, the same gradient
+`gradient`, one warm equilibrium plus the adjoint; `numpy x`, how many times
+faster that gradient is than the same gradient by a plain numpy/scipy
+implementation (`tendon_taichi/apps/baseline.py`: the energy, its gradient and
+exact Hessian vectorized in numpy, Newton with SuperLU, the adjoint), timed in
+the same run; `forward`, the same gradient
 by one solve per fiber (where that finishes in reasonable time); `optimize`, the
 whole regularized optimization with the backend `--solver auto` picks at that
 size; `mem MB`, the process's peak resident memory. Exponents are least-squares
@@ -86,11 +91,11 @@ def page(result: dict, lines: list[str], plot: str) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5])
+    ap.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4, 5, 6])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--out", type=Path, default=HERE)
     ap.add_argument("--page", type=Path, default=PAGE)
-    ap.add_argument("--optimize-levels", type=int, nargs="+", default=None, metavar="N")
+    ap.add_argument("--optimize-levels", type=int, nargs="+", default=[1, 2, 3, 4, 5], metavar="N")
     ap.add_argument("--no-optimize", action="store_true")
     ap.add_argument("--page-only", action="store_true", help="write table.txt and the page from DIR/bench.json")
     args = ap.parse_args(argv)

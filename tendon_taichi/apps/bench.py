@@ -7,7 +7,9 @@ equilibrium from rest and one warm-started from a nearby design (contraction
 ratios moved by +-0.5 %); Newton and CG iterations; one adjoint solve; one full
 gradient (warm equilibrium + adjoint); the gradient by forward sensitivities
 (one solve per fiber, the method of Bern et al. 2017) where that finishes in
-reasonable time; the process's peak memory; and the whole regularized
+reasonable time; the same gradient by a plain numpy/scipy implementation
+(:mod:`.baseline`), timed in the same run, and how many times faster the
+pipeline's is; the process's peak memory; and the whole regularized
 optimization with the quality of each installed extractor's tendons.
 """
 
@@ -37,6 +39,7 @@ from ..solve.linear import resolve_solver
 from ..solve.newton import NewtonSolver
 from ..tasks.engine import Task, case_id, run_tasks
 from ..version import provenance
+from .baseline import BaselineGradient
 from .case import STOP, run_case, worker_setup
 
 #: seconds-valued figures, in the order of the table and the plot
@@ -131,6 +134,28 @@ def measure_solver(problem, solver: str, repeat: int, forward_max_fibers: int, p
         out["forward_vs_adjoint_rel_diff"] = float(np.linalg.norm(g_fwd - g) / np.linalg.norm(g))
         progress(f"  {lin.name}: forward sensitivities {dt:.2f} s ({problem.fibers.n_fibers} solves)")
     return out
+
+
+def measure_baseline(problem, repeat: int, progress) -> dict:
+    """The gradient of :func:`measure_solver` (warm equilibrium at the nearby design
+    from the first's, then the adjoint) by the numpy/scipy baseline (:mod:`.baseline`)."""
+    base = BaselineGradient(problem, problem.scene.optimize.contraction_reg)
+    r0, r1 = _designs(problem)
+    x0 = base.equilibrium(r0 * problem.fibers.a0, problem.mesh.nodes)
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        base.objective_gradient(r1, x0)
+        times.append(time.perf_counter() - t)
+    progress(f"  numpy/scipy baseline: gradient {statistics.median(times):.4f} s")
+    return _stats(times)
+
+
+def speedups(entry: dict) -> dict:
+    """Per backend, the baseline's gradient time over the backend's (medians)."""
+    base = entry.get("baseline_gradient_s")
+    return {s: base["median"] / f["gradient_s"]["median"] for s, f in entry["solvers"].items()
+            if base and f.get("gradient_s")}
 
 
 def _states(ik: SoftIK, r: np.ndarray):
@@ -229,6 +254,8 @@ def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int =
                 jobs.append((fig, Task(case_id({"kind": "bench", "scene": scene.source, "level": level,
                                                 "solver": solver}),
                                        f"level {level} {solver}", optimize_case, (scene, level, solver, str(out_dir)))))
+        entry["baseline_gradient_s"] = measure_baseline(p, repeat, progress)
+        entry["gradient_speedup"] = speedups(entry)
         rows.append(entry)
     report = run_tasks([t for _, t in jobs], None, workers, scheduler, reporter, describe=_describe_optimize,
                        setup=worker_setup(), stop=STOP)
@@ -276,7 +303,7 @@ def write_outputs(result: dict, out_dir: Path) -> None:
             w = csv.writer(fh)
             head = ["level", "nodes", "triangles", "fibers", "dofs", "solver"] + list(TIMINGS) + \
                    ["newton_cold", "newton_warm", "cg_cold", "cg_warm", "peak_memory_mb", "stages",
-                    "pose_error_rel", "active_length", "active_fibers"]
+                    "pose_error_rel", "active_length", "active_fibers", "baseline_gradient_s", "gradient_speedup"]
             w.writerow(head)
             for r in result["levels"]:
                 for s, f in r["solvers"].items():
@@ -285,21 +312,24 @@ def write_outputs(result: dict, out_dir: Path) -> None:
                                + [f["newton_iterations"]["cold"], f["newton_iterations"]["warm"],
                                   f["cg_iterations"]["cold"], f["cg_iterations"]["warm"], f["peak_memory_mb"],
                                   f.get("stages", ""), f.get("pose_error_rel", ""), f.get("active_length", ""),
-                                  f.get("active_fibers", "")])
+                                  f.get("active_fibers", ""), r.get("baseline_gradient_s", {}).get("median", ""),
+                                  r.get("gradient_speedup", {}).get(s, "")])
     plot_bench(out_dir / "bench.png", result, TIMINGS)
 
 
 def table(result: dict) -> list[str]:
     """The human-readable table of a bench result."""
     rows = [f"{'level':>5} {'DOFs':>6} {'fibers':>6} {'solver':>9} {'eq cold':>8} {'eq warm':>8} {'Newton':>7} "
-            f"{'CG it':>9} {'adjoint':>8} {'gradient':>8} {'forward':>8} {'optimize':>8} {'mem MB':>7}"]
+            f"{'CG it':>9} {'adjoint':>8} {'gradient':>8} {'numpy x':>8} {'forward':>8} {'optimize':>8} "
+            f"{'mem MB':>7}"]
     fmt = lambda v: f"{v['median']:.3f}" if v else "-"  # noqa: E731
+    speed = lambda r, s: f"{r['gradient_speedup'][s]:.1f}" if s in r.get("gradient_speedup", {}) else "-"  # noqa: E731
     for r in result["levels"]:
         for s, f in r["solvers"].items():
             rows.append(f"{r['level']:>5} {r['dofs']:>6} {r['fibers']:>6} {s:>9} {fmt(f['equilibrium_cold_s']):>8} "
                         f"{fmt(f['equilibrium_warm_s']):>8} "
                         f"{f['newton_iterations']['cold']:>3}/{f['newton_iterations']['warm']:<3} "
                         f"{f['cg_iterations']['cold']:>4}/{f['cg_iterations']['warm']:<4} {fmt(f['adjoint_s']):>8} "
-                        f"{fmt(f['gradient_s']):>8} {fmt(f.get('forward_sensitivity_s')):>8} "
+                        f"{fmt(f['gradient_s']):>8} {speed(r, s):>8} {fmt(f.get('forward_sensitivity_s')):>8} "
                         f"{fmt(f.get('optimize_s')):>8} {f['peak_memory_mb']:>7.0f}")
     return rows
