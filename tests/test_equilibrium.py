@@ -164,3 +164,40 @@ def test_large_contraction_keeps_triangles_valid():
     x = eq.x
     assert np.linalg.det(np.stack([x[T[:, 1]] - x[T[:, 0]], x[T[:, 2]] - x[T[:, 0]]], -1)).min() > 0
     assert eq.residual <= 1e-10
+
+
+def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu():
+    """At a stable equilibrium the Hessian is positive definite and factorized by
+    LDL^T (its symbolic analysis kept for the next); shifted to be indefinite it
+    is factorized by SuperLU; both solve their own matrix, and a factorization
+    still solves its own matrix after a newer one of the same pattern replaced the
+    shared LDL^T factors."""
+    from dataclasses import replace
+
+    import scipy.sparse as sp
+
+    from tendon_taichi.solve.direct import DirectSolver
+
+    p = build_problem(load_scene("t_shape"), 1)
+    m = Model.from_problem(p)
+    NewtonSolver(m, "direct").solve(ac=0.05 * p.fibers.a0, x0=p.mesh.nodes)
+    d = DirectSolver(m)
+    H = d.assemble_ordered()
+    n = H.Hp.shape[0]
+    b = np.random.default_rng(0).standard_normal(n)
+
+    def residual(fac, Hp):
+        y = fac.solve_ordered(b)
+        return np.linalg.norm(Hp @ y - b) / np.linalg.norm(b)
+
+    spd = d.factorize(H)
+    assert spd.ldl is not None and spd.lu is None and residual(spd, H.Hp) < 1e-10
+    lowest = sp.linalg.eigsh(H.Hp, k=1, sigma=0, which="LM", return_eigenvectors=False)[0]
+    data = H.Hp.data.copy()  # the same pattern, shifted by twice the lowest eigenvalue: one negative
+    data[H.Hp.indices == np.repeat(np.arange(n), np.diff(H.Hp.indptr))] -= 2 * abs(lowest)
+    shifted = sp.csc_matrix((data, H.Hp.indices, H.Hp.indptr), shape=(n, n))
+    indefinite = d.factorize(replace(H, Hp=shifted))
+    assert indefinite.ldl is None and indefinite.lu is not None and residual(indefinite, shifted) < 1e-8
+    again = d.factorize(replace(H, Hp=sp.csc_matrix((2.0 * H.Hp.data, H.Hp.indices, H.Hp.indptr))))
+    assert again.ldl is spd.ldl  # the same symbolic analysis, new numbers
+    assert residual(again, 2.0 * H.Hp) < 1e-10 and residual(spd, H.Hp) < 1e-10  # spd made its own copy

@@ -20,7 +20,9 @@ is ``-lambda^T dR/dX`` from the same adjoint solve
 (:func:`~tendon_taichi.physics.waypoints.rest_point_gradient`), and the
 waypoints are linear in the control points (:mod:`.routes`). Every evaluation
 embeds the waypoints in the rest mesh anew and solves each pose's as-built
-equilibrium (capstan friction included), warm started from the last one.
+equilibrium (capstan friction included), warm started from the last one. The
+contractions are bounded by ``STROKE`` x max_contraction: a route shaped to need
+the whole stroke on one mesh has none left on a finer one.
 """
 
 from __future__ import annotations
@@ -53,6 +55,9 @@ BEND_WEIGHT = 1.0e-2
 MAX_TURNING = np.pi / 2
 #: smoothing of |theta| in the friction cost (rad): sqrt(theta^2 + d^2) - d
 TURN_SMOOTHING = 1.0e-3
+#: route optimization keeps each contraction within this fraction of the scene's max_contraction:
+#: routes shaped to need the whole stroke on one mesh have none left on a finer one (or on the bench)
+STROKE = 0.9
 
 
 def turns(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -162,13 +167,13 @@ class RouteObjective:
         return routes, z[self.n_control:].reshape(self.problem.n_poses, len(self.routes))
 
     def bounds(self) -> so.Bounds:
-        """Control points within the body's bounding box, ratios within [-pmax, cmax]."""
+        """Control points within the body's bounding box, ratios within [-pmax, STROKE cmax]."""
         lo, hi = self.problem.mesh.nodes.min(axis=0) / self.L, self.problem.mesh.nodes.max(axis=0) / self.L
         n = sum(self.sizes)
         fs = self.problem.scene.fibers
         r = self.problem.n_poses * len(self.routes)
         return so.Bounds(np.r_[np.tile(lo, n), np.full(r, -fs.max_payout)],
-                         np.r_[np.tile(hi, n), np.full(r, fs.max_contraction)])
+                         np.r_[np.tile(hi, n), np.full(r, STROKE * fs.max_contraction)])
 
     # ------------------------------------------------------------ explicit terms
     def clearance_cost(self, points: np.ndarray) -> tuple[float, np.ndarray]:

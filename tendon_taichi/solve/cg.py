@@ -109,7 +109,7 @@ def cg_solution(model: Model) -> np.ndarray:
 
 
 class FactorPreconditioner:
-    """M^-1 = a SuperLU factorization of the Hessian at a reference state, reused
+    """M^-1 = the direct backend's factorization of the Hessian at a reference state, reused
     while the solves it preconditions stay short: a solve that takes more than
     ``refresh_iterations`` marks it stale, and the next solve refreshes it at the
     state of the moment (a factorization at a nearby design preconditions to a

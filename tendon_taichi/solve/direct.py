@@ -1,6 +1,10 @@
 """The direct backend: the model's Hessian assembled as a scipy sparse matrix on
-the free DOFs and factorized by SuperLU, with a fill-reducing ordering
-computed once per sparsity pattern.
+the free DOFs and factorized, with a fill-reducing ordering computed once per
+sparsity pattern: by LDL^T (qdldl, its symbolic analysis once per pattern and
+only the numbers afterwards) where the matrix is positive definite - at and
+near a stable equilibrium, almost always - and by SuperLU with pivoting where
+it is not (an LDL^T with a pivot <= 0 proves it: by Sylvester's law of inertia
+D has as many negative entries as the matrix has negative eigenvalues).
 
 A many-segment cable (a tendon) couples every node along it through its axial
 stiffness ``kc g g^T`` (``g = dL/dx``, ``L`` its weighted length): a dense
@@ -16,6 +20,7 @@ from dataclasses import dataclass
 from typing import Iterable, Iterator
 
 import numpy as np
+import qdldl
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -42,25 +47,67 @@ class Assembled:
         return out
 
 
-class Factorization:
-    """A SuperLU factorization of an :class:`Assembled` Hessian's sparse part, with
-    the low-rank part by Woodbury's identity; :meth:`solve` works in the free-DOF
-    numbering (``order`` maps it to the ordered one)."""
+class LDL:
+    """LDL^T factorizations (qdldl) of symmetric matrices of one sparsity pattern
+    (CSC ``indptr``, ``indices``, n x n): the symbolic analysis with the first,
+    only the numbers after. One factorization is current at a time
+    (``generation`` counts them)."""
 
-    def __init__(self, H: Assembled, order: np.ndarray):
-        try:
-            self.lu = spla.splu(H.Hp, permc_spec="NATURAL", diag_pivot_thresh=0.1,
-                                options={"SymmetricMode": True})
-        except RuntimeError as exc:  # exactly singular
-            raise np.linalg.LinAlgError(str(exc)) from None
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int):
+        col = np.repeat(np.arange(n), np.diff(indptr))
+        self.upper = indices <= col  # the upper triangle, in the pattern's order
+        self.indices = indices[self.upper]
+        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(col[self.upper], minlength=n))]).astype(np.int32)
+        self.n = n
+        self.solver = None
+        self.generation = 0
+
+    def factor(self, data: np.ndarray) -> bool:
+        """Factorize the matrix of entries ``data`` (in the pattern's order); whether
+        it is positive definite (every pivot > 0), else the factors are not to be used."""
+        A = sp.csc_matrix((data[self.upper], self.indices, self.indptr), shape=(self.n, self.n))
+        if self.solver is None:
+            self.solver = qdldl.Solver(A, upper=True)
+        else:
+            self.solver.update(A, upper=True)
+        self.generation += 1
+        return bool(np.all(self.solver.factors()[1] > 0.0))
+
+
+class Factorization:
+    """A factorization of an :class:`Assembled` Hessian's sparse part - LDL^T
+    (``ldl``, an :class:`LDL` of its pattern) where it is positive definite, else
+    SuperLU - with the low-rank part by Woodbury's identity; :meth:`solve` works
+    in the free-DOF numbering (``order`` maps it to the ordered one)."""
+
+    def __init__(self, H: Assembled, order: np.ndarray, ldl: LDL | None = None):
+        self.Hp, self.ldl, self.lu = H.Hp, None, None
+        if ldl is not None and H.Hp.shape[0] and ldl.factor(H.Hp.data):
+            self.ldl, self.generation = ldl, ldl.generation
+        else:
+            try:
+                self.lu = spla.splu(H.Hp, permc_spec="NATURAL", diag_pivot_thresh=0.1,
+                                    options={"SymmetricMode": True})
+            except RuntimeError as exc:  # exactly singular
+                raise np.linalg.LinAlgError(str(exc)) from None
         self.order = order
         self.U = H.U
         if len(H.K):
-            self.AinvU = self.lu.solve(np.asfortranarray(H.U))
+            self.AinvU = np.column_stack([self._sparse_solve(u) for u in H.U.T])
             self.capacitance = np.diag(1.0 / H.K) + H.U.T @ self.AinvU
 
+    def _sparse_solve(self, b: np.ndarray) -> np.ndarray:
+        """Hp^-1 b, b (nf,) in the ordered numbering."""
+        if self.lu is not None:
+            return self.lu.solve(b)
+        if self.ldl.generation != self.generation:  # the shared factors moved on: factorize a copy of its own
+            own = LDL(self.Hp.indptr, self.Hp.indices, self.Hp.shape[0])
+            own.factor(self.Hp.data)
+            self.ldl, self.generation = own, own.generation
+        return self.ldl.solver.solve(b)
+
     def solve_ordered(self, bp: np.ndarray) -> np.ndarray:
-        y = self.lu.solve(bp)
+        y = self._sparse_solve(bp)
         if self.U.shape[1]:
             y -= self.AinvU @ np.linalg.solve(self.capacitance, self.U.T @ y)
         return y
@@ -119,6 +166,7 @@ class DirectSolver(LinearSolver):
         self.indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
         self.shape = (nf, nf)
         self.nnz = len(uniq)
+        self.ldl: LDL | None = None  # made with the first factorization
 
     def cables_moved(self) -> None:
         """New barycentric weights of the cables' points (the same triangles: the
@@ -178,7 +226,9 @@ class DirectSolver(LinearSolver):
 
     def factorize(self, H: Assembled) -> Factorization:
         """Factorize an ordered Hessian (:meth:`assemble_ordered`)."""
-        return Factorization(H, self.order)
+        if self.ldl is None:
+            self.ldl = LDL(self.indptr, self.indices, self.shape[0])
+        return Factorization(H, self.order, self.ldl)
 
     def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:
         lu = self.factorize(H)
