@@ -29,7 +29,7 @@ def test_every_script_has_a_test():
     scripts = {p.relative_to(BENCH).as_posix() for p in BENCH.rglob("*.py")}
     tested = {"simulate_levels.py", "how_it_works/make_figure.py", "planted/make_suite.py", "planted/reextract.py",
               "planted/counts_by_level.py", "sweeps/dask_overhead.py", "bench/make_bench.py",
-              "planted_results/make_results.py", "hostile_input/make_table.py"}
+              "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py"}
     assert scripts == tested
 
 
@@ -159,3 +159,17 @@ def test_the_hostile_input_table_runs_a_case_and_writes_its_row(tmp_path):
     assert second[2] == "2" and "degrees of freedom" in second[3] and second[4] == "`s.toml`"
     text = mt.table(b.rows).splitlines()
     assert text[0].startswith("| case |") and len(text) == 4 and text[2].startswith("| 9. `simulate finger")
+
+
+def test_versus_commit_times_both_pipelines(tmp_path):
+    """With this environment standing in for the earlier commit's (its optimize and
+    compare), the script times both pipelines per level and writes the ratio."""
+    venv = Path(sys.executable).parent.parent
+    if not (venv / "bin" / "tendon-taichi").exists():
+        pytest.skip("the interpreter is not in a virtual environment with tendon-taichi installed")
+    out = run(BENCH / "bench" / "versus_commit.py", venv, "--levels", 1, "--tiny", "--out", tmp_path,
+              "--json", tmp_path / "v.json")
+    row = json.loads((tmp_path / "v.json").read_text())["levels"][0]
+    assert row["level"] == 1 and row["old_s"] == pytest.approx(row["old_optimize_s"] + row["old_compare_s"])
+    assert row["speedup"] == pytest.approx(row["old_s"] / row["design_s"])
+    assert (tmp_path / "design-r1" / "design.json").exists() and "old / new" in out.stdout
