@@ -50,8 +50,7 @@ class BaselineGradient:
         self.X, self.T = mesh.nodes, mesh.triangles
         n, T = len(self.X), self.T
         self.free = np.repeat(~problem.fixed, 2)
-        self.mu, self.lam, self.h = mat.mu, mat.youngs_modulus * mat.poisson_ratio / (
-            (1 + mat.poisson_ratio) * (1 - 2 * mat.poisson_ratio)), mat.thickness
+        self.mu, self.lam, self.h = mat.mu, mat.lam, mat.thickness
         Dm = np.stack([self.X[T[:, 1]] - self.X[T[:, 0]], self.X[T[:, 2]] - self.X[T[:, 0]]], axis=2)
         self.Bm = np.linalg.inv(Dm)  # (m, 2, 2)
         self.vol = self.h * 0.5 * np.abs(np.linalg.det(Dm))  # h A_e, m^3
@@ -75,7 +74,7 @@ class BaselineGradient:
                           format="csr")
         self.goal, self.L = problem.target_goal.ravel(), problem.size
         self.w_reg = contraction_reg
-        self.F = mat.youngs_modulus * mat.thickness * self.L  # the force scale E h L, N
+        self.F = problem.force_scale  # E h L, N
 
     # ------------------------------------------------------------ the energy
     def _elements(self, x: np.ndarray):
