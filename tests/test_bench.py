@@ -53,10 +53,15 @@ def test_bench_writes_its_outputs(tmp_path, cli):
     for s in ("cg", "direct"):
         assert one[s]["stages"] == 3 and one[s]["optimize_s"]["median"] > 0
         assert set(one[s]["extractors"]) >= {"strands", "path_cover", "network_discovery"}
+        rrd = out / f"small_finger-r1-{s}" / "run.rrd"
+        assert one[s]["recording_mb"] == rrd.stat().st_size / 1e6 > 0
+        assert one[s]["design_s"] >= one[s]["optimize_s"]["median"]
     assert "optimize_s" not in res["levels"][1]["solvers"]["cg"]
     rows = list(csv.DictReader(open(out / "bench.csv")))
     assert len(rows) == 4 and {r["solver"] for r in rows} == {"cg", "direct"}
     assert all(float(r["gradient_speedup"]) > 0 for r in rows)
+    assert {float(r["recording_mb"]) for r in rows if r["recording_mb"]} == \
+        {one[s]["recording_mb"] for s in ("cg", "direct")}
     assert (out / "bench.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     for s in ("cg", "direct"):
         assert np.isfinite(res["exponents"][s]["equilibrium_cold_s"])

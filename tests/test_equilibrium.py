@@ -8,6 +8,8 @@ from reference import body_forces, fiber_forces, gravity_forces
 
 from tendon_taichi import (ConvergenceError, Model, NewtonSolver, build_problem, load_scene,
                            parse_scene)
+from tendon_taichi.solve import DirectSolver
+from tendon_taichi.solve.multigrid import rigid_modes
 
 
 def _residual_from_export(path):
@@ -58,16 +60,16 @@ def test_cg_and_direct_agree(scene, level):
     m = Model.from_problem(p)
     ac = 0.08 * p.fibers.a0
     xs = {}
-    for solver in ("cg", "cg-jacobi", "direct"):
+    for solver in ("cg", "cg-amg", "cg-jacobi", "direct"):
         m.reset()
         eq = NewtonSolver(m, solver).solve(ac=ac)
         assert eq.residual <= 1e-10
         xs[solver] = eq.x
-    assert np.abs(xs["cg"] - xs["direct"]).max() <= 1e-8 * p.size
-    assert np.abs(xs["cg-jacobi"] - xs["direct"]).max() <= 1e-8 * p.size
+    for solver in ("cg", "cg-amg", "cg-jacobi"):
+        assert np.abs(xs[solver] - xs["direct"]).max() <= 1e-8 * p.size
 
 
-@pytest.mark.parametrize("solver", ["cg", "cg-jacobi", "direct"])
+@pytest.mark.parametrize("solver", ["cg", "cg-amg", "cg-jacobi", "direct"])
 def test_warm_start_takes_fewer_newton_iterations(solver):
     p = build_problem(load_scene("t_shape"), 1)
     m = Model.from_problem(p)
@@ -82,7 +84,7 @@ def test_warm_start_takes_fewer_newton_iterations(solver):
     assert np.abs(warm.x - cold.x).max() <= 1e-8 * p.size
 
 
-@pytest.mark.parametrize("solver", ["cg", "cg-jacobi", "direct"])
+@pytest.mark.parametrize("solver", ["cg", "cg-amg", "cg-jacobi", "direct"])
 def test_newton_from_rest_iteration_count(solver):
     """Exact Hessian first (docs/method.md, numerics): t_shape level 2, uniform 0.05."""
     p = build_problem(load_scene("t_shape"), 2)
@@ -92,7 +94,7 @@ def test_newton_from_rest_iteration_count(solver):
     assert eq.residual <= 1e-10
 
 
-@pytest.mark.parametrize("solver", ["cg", "cg-jacobi", "direct"])
+@pytest.mark.parametrize("solver", ["cg", "cg-amg", "cg-jacobi", "direct"])
 def test_serial_and_parallel_loops_agree(solver):
     p = build_problem(load_scene("gripper"), 1)
     ac = 0.06 * p.fibers.a0
@@ -119,6 +121,37 @@ def test_preconditioners_agree_and_factor_needs_few_iterations():
     warm = fac.solve(ac=ac * (1 + 0.005 * rng.uniform(-1, 1, len(ac))))
     assert warm.linear_iterations <= 15 * warm.newton_iterations
     assert fac.linear.pre.refreshes >= 1
+
+
+def test_rigid_modes_are_the_unclamped_hessians_null_space():
+    """The multigrid preconditioner's near-null space: at rest, with nothing
+    clamped, the Hessian maps every rigid motion of the nodes to zero."""
+    p = build_problem(load_scene("t_shape"), 1)
+    m = Model(p.mesh, np.zeros(p.mesh.n_nodes, dtype=bool), p.material, p.fiber_cables)
+    H = DirectSolver(m, ordered=False).assemble_ordered().Hp
+    B = rigid_modes(p.mesh.nodes)
+    scale = abs(H).sum(axis=1).max() * np.abs(B).max()
+    assert np.abs(H @ B).max() <= 1e-10 * scale
+    assert np.linalg.matrix_rank(B) == 3
+
+
+def test_multigrid_preconditioner_solves_to_the_direct_solution():
+    """cg-amg: PCG with the V-cycle of the Hessian at the same state converges in
+    few iterations to the factorization's solution;
+    the adjoint-type solve is exact to its tolerance."""
+    p = build_problem(load_scene("t_shape"), 2)
+    rng = np.random.default_rng(3)
+    ac = rng.uniform(0.02, 0.08, p.fibers.n_fibers) * p.fibers.a0
+    amg, direct = NewtonSolver(Model.from_problem(p), "cg-amg"), NewtonSolver(Model.from_problem(p), "direct")
+    x = amg.solve(ac=ac, x0=p.mesh.nodes).x
+    assert np.abs(x - direct.solve(ac=ac, x0=p.mesh.nodes).x).max() <= 1e-8 * p.size
+    b = rng.standard_normal((p.mesh.n_nodes, 2))
+    amg.linear.pre.reset()
+    y = amg.linear.solve(b, tol=1e-10)
+    assert amg.linear.last.iterations <= 60
+    assert amg.linear.pre.levels >= 2
+    y_direct = direct.linear.solve(b)
+    assert np.abs(y - y_direct).max() <= 1e-8 * np.abs(y_direct).max()
 
 
 def test_solve_many_after_a_long_cg_solve():

@@ -176,7 +176,7 @@ def test_friction_jacobian_matches_finite_differences():
     assert (u * E.product(v)).sum() == pytest.approx((v * E.transpose_product(u)).sum(), rel=1e-10)
 
 
-@pytest.mark.parametrize("solver", ["direct", "cg"])
+@pytest.mark.parametrize("solver", ["direct", "cg", "cg-amg"])
 def test_frictional_gradient_and_sensitivities_match_finite_differences(solver):
     p = build_problem(load_scene("t_shape"), 1)
     cables = CableSet.polylines(p.mesh, _t_shape_paths(), 50.0, friction=0.3)

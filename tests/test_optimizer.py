@@ -65,6 +65,10 @@ def test_adjoint_gradient_matches_finite_differences(t_shape_1, solver, terms):
     _check_adjoint_gradient(t_shape_1, dict(strand_end=1e-4, effort=1e-3), solver, terms)
 
 
+def test_adjoint_gradient_with_the_multigrid_backend(t_shape_1):
+    _check_adjoint_gradient(t_shape_1, dict(strand_end=1e-4, effort=1e-3), "cg-amg", TERMS)
+
+
 def _check_adjoint_gradient(p, settings, solver, terms):
     """The objective's adjoint gradient (only ``terms`` on, at k = 0.4) against
     central differences along two random directions; returns the SoftIK and the objective."""

@@ -5,9 +5,10 @@ Usage: python benchmarks/bench/make_bench.py [--levels 1 2 3 4 5 6] [--repeat 3]
        [--page FILE] [--optimize-levels N ... | --no-optimize]
        python benchmarks/bench/make_bench.py --page-only [--out DIR] [--page FILE]
 
-Runs the resolution-scaling benchmark on t_shape with both linear backends and
-the whole optimization with the backend ``--solver auto`` picks at each level
-(``tendon-taichi bench t_shape --levels ... --solver cg direct --repeat N
+Runs the resolution-scaling benchmark on t_shape with the linear backends cg,
+cg-amg and direct, and the whole design pipeline with the backend ``--solver
+auto`` picks at each level
+(``tendon-taichi bench t_shape --levels ... --solver cg cg-amg direct --repeat N
 --optimize-solver auto --out DIR``; ``--optimize-levels`` runs the whole
 optimization at those levels only), then writes DIR/table.txt and the page
 (the table, the fitted exponents, the plot, the optimization's quality per
@@ -57,8 +58,8 @@ def quality_table(result: dict) -> list[str]:
     """Per level: the whole optimization and each extractor's tendons (count /
     realizable pose error in % of L / kinks)."""
     names = sorted({n for lv in result["levels"] for f in lv["solvers"].values() for n in f.get("extractors", {})})
-    rows = ["| level | optimize | pose error | active length | " + " | ".join(names) + " |",
-            "|---|---|---|---|" + "---|" * len(names)]
+    rows = ["| level | optimize | design | recording | pose error | active length | " + " | ".join(names) + " |",
+            "|---|---|---|---|---|---|" + "---|" * len(names)]
     for lv in result["levels"]:
         for solver, f in lv["solvers"].items():
             if "optimize_s" not in f:
@@ -68,7 +69,9 @@ def quality_table(result: dict) -> list[str]:
                 e = f["extractors"].get(n, {})
                 cells.append("failed" if "error" in e else
                              f"{e['tendons']} / {100 * e['realizable_pose_error_rel']:.2f} / {e['kinks']}")
-            rows.append(f"| {lv['level']} | {f['optimize_s']['median']:.1f} s ({solver}) | "
+            design = f"{f['design_s']:.1f} s" if "design_s" in f else "-"
+            size = f"{f['recording_mb']:.1f} MB" if "recording_mb" in f else "-"
+            rows.append(f"| {lv['level']} | {f['optimize_s']['median']:.1f} s ({solver}) | {design} | {size} | "
                         f"{100 * f['pose_error_rel']:.2f} % | {100 * f['active_length']:.1f} cm | "
                         + " | ".join(cells) + " |")
     return rows
@@ -85,7 +88,10 @@ def page(result: dict, lines: list[str], plot: str) -> str:
         f"on {p['date']}, by `{p['made_by']}`.",
         "", "```text", *lines, *exps, f"compile {result['compile_s']:.1f} s", "```", "",
         f"![bench]({plot})", "",
-        "The whole optimization per level (extractor columns: tendons / realizable pose error in % of L / kinks):",
+        "The whole design pipeline per level (`optimize`, its regularized optimization; `design`, all of it -",
+        "the optimization, every extractor with consolidation and route optimization, the front re-solved",
+        "on the next finer mesh; `recording`, the size of its `run.rrd`; extractor columns: tendons /",
+        "realizable pose error in % of L / kinks):",
         "", *quality_table(result), ""])
 
 
@@ -102,7 +108,7 @@ def main(argv=None) -> int:
     if args.page_only:
         result = json.loads((args.out / "bench.json").read_text())
     else:
-        result = run_bench(load_scene("t_shape"), args.levels, ["cg", "direct"], args.repeat, args.out,
+        result = run_bench(load_scene("t_shape"), args.levels, ["cg", "cg-amg", "direct"], args.repeat, args.out,
                            [] if args.no_optimize else args.optimize_levels, optimize_solver="auto")
     lines = table(result)
     (args.out / "table.txt").write_text("\n".join(lines) + "\n")

@@ -191,7 +191,8 @@ def optimize_case(scene: Scene, level: int, solver: str, out_dir: str) -> dict:
     """The whole design pipeline - the regularized optimization, every installed
     extractor on its last stage with consolidation and route optimization, the
     recommended design - (a task of :func:`~tendon_taichi.tasks.engine.run_tasks`)."""
-    case = run_case(scene, level, Path(out_dir) / f"{file_stem(scene.name)}-r{level}-{solver}", solver)
+    out = Path(out_dir) / f"{file_stem(scene.name)}-r{level}-{solver}"
+    case = run_case(scene, level, out, solver)
     run, timing = case.run, case.summary["timing"]
     dt = timing["optimize_s"]
     final = run.summary["final"]
@@ -200,6 +201,7 @@ def optimize_case(scene: Scene, level: int, solver: str, out_dir: str) -> dict:
            "stages": len(run.stages), "pose_error_rel": final["pose_error_rel"],
            "active_fibers": final["active_fibers"], "active_length": final["active_length"],
            "evaluations": run.summary.get("evaluations"),
+           "recording_mb": (out / "run.rrd").stat().st_size / 1e6,
            "design": {"tendons": rec["count"], "kinks": rec["metrics"]["kinks"],
                       "capstan_worst": rec["metrics"]["capstan_worst"],
                       "realizable_pose_error_rel": rec["metrics"]["realizable_pose_error_rel"]}}
@@ -303,7 +305,8 @@ def write_outputs(result: dict, out_dir: Path) -> None:
             w = csv.writer(fh)
             head = ["level", "nodes", "triangles", "fibers", "dofs", "solver"] + list(TIMINGS) + \
                    ["newton_cold", "newton_warm", "cg_cold", "cg_warm", "peak_memory_mb", "stages",
-                    "pose_error_rel", "active_length", "active_fibers", "baseline_gradient_s", "gradient_speedup"]
+                    "pose_error_rel", "active_length", "active_fibers", "baseline_gradient_s", "gradient_speedup",
+                    "design_s", "recording_mb"]
             w.writerow(head)
             for r in result["levels"]:
                 for s, f in r["solvers"].items():
@@ -313,7 +316,8 @@ def write_outputs(result: dict, out_dir: Path) -> None:
                                   f["cg_iterations"]["cold"], f["cg_iterations"]["warm"], f["peak_memory_mb"],
                                   f.get("stages", ""), f.get("pose_error_rel", ""), f.get("active_length", ""),
                                   f.get("active_fibers", ""), r.get("baseline_gradient_s", {}).get("median", ""),
-                                  r.get("gradient_speedup", {}).get(s, "")])
+                                  r.get("gradient_speedup", {}).get(s, ""), f.get("design_s", ""),
+                                  f.get("recording_mb", "")])
     plot_bench(out_dir / "bench.png", result, TIMINGS)
 
 

@@ -1,6 +1,7 @@
 """Solving for equilibria and with the Hessian: Newton (:mod:`.newton`) on the
-linear backends of the protocol :mod:`.linear` - matrix-free CG (:mod:`.cg`)
-and the sparse direct factorization (:mod:`.direct`), by name in :mod:`.backends`."""
+linear backends of the protocol :mod:`.linear` - matrix-free CG (:mod:`.cg`,
+its multigrid preconditioner in :mod:`.multigrid`) and the sparse direct
+factorization (:mod:`.direct`), by name in :mod:`.backends`."""
 
 from .._lazy import lazy_exports
 
@@ -8,6 +9,7 @@ __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     ".linear": ("LinearSolver", "LinearStats", "SOLVERS", "AUTO_DIRECT_MAX_DOFS", "resolve_solver"),
     ".backends": ("make_linear_solver",),
     ".cg": ("CGSolver", "CGStatus", "FactorPreconditioner"),
+    ".multigrid": ("MultigridPreconditioner",),
     ".direct": ("DirectSolver", "Factorization"),
     ".newton": ("NewtonSolver", "Equilibrium"),
 })

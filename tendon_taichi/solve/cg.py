@@ -1,7 +1,8 @@
 """The matrix-free CG backend: Hessian products in Taichi (the model is the
 operator), preconditioned by a reused factorization of the Hessian at a
-nearby state (``cg``) or by 2x2 block Jacobi inside one fused Taichi kernel
-per iteration (``cg-jacobi``)."""
+nearby state (``cg``), by a reused algebraic-multigrid V-cycle of it
+(``cg-amg``, :mod:`.multigrid`) or by 2x2 block Jacobi inside one fused Taichi
+kernel per iteration (``cg-jacobi``)."""
 
 from __future__ import annotations
 
@@ -17,8 +18,10 @@ from . import _cg_kernels as kernels
 from ._newton_kernels import newton_rhs, take_direction
 from .direct import DirectSolver, Factorization
 from .linear import LinearSolver, LinearStats
+from .multigrid import MultigridPreconditioner
 
-PRECONDITIONERS = ("factor", "jacobi")
+#: preconditioner -> the backend's name in SOLVERS
+PRECONDITIONERS = {"factor": "cg", "multigrid": "cg-amg", "jacobi": "cg-jacobi"}
 
 
 @dataclass(frozen=True)
@@ -153,18 +156,20 @@ class FactorPreconditioner:
 
 class CGSolver(LinearSolver):
     """Matrix-free PCG: Hessian products in Taichi, preconditioned by a reused
-    factorization (``factor``, default) or by 2x2 block Jacobi inside one fused
-    Taichi kernel per iteration (``jacobi``)."""
+    factorization (``factor``, default), a reused algebraic-multigrid V-cycle
+    (``multigrid``) or by 2x2 block Jacobi inside one fused Taichi kernel per
+    iteration (``jacobi``)."""
 
     def __init__(self, model: Model, max_iter: int | None = None, preconditioner: str = "factor"):
         if preconditioner not in PRECONDITIONERS:
             raise InputError(f"unknown preconditioner '{preconditioner}' (choose from "
                              f"{', '.join(PRECONDITIONERS)})")
         #: the backend's name in SOLVERS (what a recording keeps, so replay takes the same one)
-        self.name = "cg" if preconditioner == "factor" else "cg-jacobi"
+        self.name = PRECONDITIONERS[preconditioner]
         self.model = model
         self.preconditioner = preconditioner
-        self.pre = FactorPreconditioner(model) if preconditioner == "factor" else None
+        self.pre = (FactorPreconditioner(model) if preconditioner == "factor" else
+                    MultigridPreconditioner(model) if preconditioner == "multigrid" else None)
         self.max_iter = max_iter or (200 if self.pre else max(1000, 4 * model.dofs))
         self.stats = LinearStats()
         self.last: CGStatus | None = None
@@ -216,7 +221,7 @@ class CGSolver(LinearSolver):
 
     def approx_solve(self, rhs: np.ndarray) -> np.ndarray | None:
         """H^-1 rhs through the preconditioner's factorization (None without one)."""
-        if self.pre is None or self.pre.lu is None:
+        if not isinstance(self.pre, FactorPreconditioner) or self.pre.lu is None:
             return None
         return self.pre(np.asarray(rhs, dtype=float).ravel()).reshape(-1, 2)
 

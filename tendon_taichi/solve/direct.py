@@ -124,17 +124,21 @@ _ELEMENT_ORDER: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 class DirectSolver(LinearSolver):
-    """The model's Hessian assembled as a scipy sparse matrix, factorized by SuperLU.
+    """The model's Hessian assembled as a scipy sparse matrix and factorized
+    (:class:`Factorization`).
 
     The sparsity pattern (free DOFs only) and the scatter map from element and
-    cable entries to it are built once; an assembly then only computes values."""
+    cable entries to it are built once; an assembly then only computes values.
+    ``ordered=False`` keeps the free DOFs' own numbering (node by node, x then y)
+    instead of a fill-reducing order, for assembly without factorization."""
 
     name = "direct"
 
-    def __init__(self, model: Model):
+    def __init__(self, model: Model, ordered: bool = True):
         self.model = model
         self.stats = LinearStats()
         self.free = np.repeat(~model.fixed, 2)
+        self.ordered = ordered
         self.factor = None  # the last factorization, reused by chord steps and predictors
         self.factor_exact = False
         self._build_structure()
@@ -155,7 +159,9 @@ class DirectSolver(LinearSolver):
         self.keep = self.free[r] & self.free[c]
         r, c = free_index[r[self.keep]], free_index[c[self.keep]]
         nf = int(self.free.sum())
-        if m.single:  # the fiber lattice: its own ordering
+        if not self.ordered:  # the free DOFs' own numbering (for preconditioners that need no ordering)
+            self.order = np.arange(nf)
+        elif m.single:  # the fiber lattice: its own ordering
             self.order = _fill_reducing_order(r, c, nf)
         else:  # tendons: the elements' ordering (the segments add local couplings only)
             self.order = self._element_order(edofs, free_index, nf)

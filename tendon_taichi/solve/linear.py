@@ -8,9 +8,11 @@ is the operator, its state is passed in. The backends by name (:data:`SOLVERS`):
 
 * ``cg`` - PCG with the Hessian products in Taichi, preconditioned by a
   reused factorization of the Hessian at a nearby state;
+* ``cg-amg`` - the same PCG preconditioned by a reused algebraic-multigrid
+  V-cycle of that Hessian (no factorization; cost linear in the DOFs);
 * ``cg-jacobi`` - block-Jacobi PCG entirely in Taichi;
 * ``direct`` - the Hessian assembled into a scipy sparse matrix and
-  factorized with SuperLU;
+  factorized (LDL^T, or SuperLU where it is not positive definite);
 * ``auto`` - ``direct`` up to :data:`AUTO_DIRECT_MAX_DOFS` free DOFs, ``cg`` above.
 """
 
@@ -25,7 +27,7 @@ import numpy as np
 from ..errors import InputError
 
 #: every backend name a user may give (``--solver``, sweep files)
-SOLVERS = ("auto", "cg", "cg-jacobi", "direct")
+SOLVERS = ("auto", "cg", "cg-amg", "cg-jacobi", "direct")
 
 #: ``auto`` takes the direct backend up to this many free DOFs and the
 #: factorization-preconditioned CG above. Measured on the 2-core CPU machine
