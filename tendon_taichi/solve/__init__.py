@@ -9,7 +9,8 @@ __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     ".linear": ("LinearSolver", "LinearStats", "SOLVERS", "AUTO_DIRECT_MAX_DOFS", "resolve_solver"),
     ".backends": ("make_linear_solver",),
     ".cg": ("CGSolver", "CGStatus", "FactorPreconditioner"),
-    ".multigrid": ("MultigridPreconditioner",),
+    ".preconditioner": ("ReusedPreconditioner",),
+    ".multigrid": ("MultigridPreconditioner", "rigid_modes"),
     ".direct": ("DirectSolver", "Factorization"),
     ".newton": ("NewtonSolver", "Equilibrium"),
 })

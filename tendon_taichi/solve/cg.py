@@ -16,9 +16,10 @@ from ..physics.layout import CGState, Scalar
 from ..physics.model import Model
 from . import _cg_kernels as kernels
 from ._newton_kernels import newton_rhs, take_direction
-from .direct import DirectSolver, Factorization
+from .direct import Factorization
 from .linear import LinearSolver, LinearStats
 from .multigrid import MultigridPreconditioner
+from .preconditioner import ReusedPreconditioner
 
 #: preconditioner -> the backend's name in SOLVERS
 PRECONDITIONERS = {"factor": "cg", "multigrid": "cg-amg", "jacobi": "cg-jacobi"}
@@ -111,7 +112,7 @@ def cg_solution(model: Model) -> np.ndarray:
     return model.node_vectors("CX")
 
 
-class FactorPreconditioner:
+class FactorPreconditioner(ReusedPreconditioner):
     """M^-1 = the direct backend's factorization of the Hessian at a reference state, reused
     while the solves it preconditions stay short: a solve that takes more than
     ``refresh_iterations`` marks it stale, and the next solve refreshes it at the
@@ -122,36 +123,18 @@ class FactorPreconditioner:
     which always is."""
 
     def __init__(self, model: Model, refresh_iterations: int = 20):
-        self.direct = DirectSolver(model)
-        self.refresh_iterations = refresh_iterations
-        self.lu: Factorization | None = None
-        self.projected = False
-        self.refreshes = 0
+        super().__init__(model, refresh_iterations)
 
     @property
-    def stale(self) -> bool:
-        return self.lu is None
+    def lu(self) -> Factorization | None:
+        """The factorization in use (None when stale)."""
+        return self.operator
 
-    def refresh(self, project: bool = False) -> None:
-        """Factorize the (exact or projected) Hessian at the model's current state
-        (this leaves the model's element tangents so: prepare them again afterwards)."""
-        try:
-            self.lu = self.direct.factorize(self.direct.assemble_ordered(project=project))
-        except np.linalg.LinAlgError:  # exactly singular: the projected one is not
-            if project:
-                raise
-            self.lu = self.direct.factorize(self.direct.assemble_ordered(project=True))
-            project = True
-        self.projected = project
-        self.refreshes += 1
+    def build(self, project: bool) -> Factorization:
+        return self.direct.factorize(self.direct.assemble_ordered(project=project))
 
-    def __call__(self, r: np.ndarray) -> np.ndarray:
-        z = np.zeros_like(r)
-        z[self.direct.free] = self.lu.solve(r[self.direct.free])
-        return z
-
-    def reset(self) -> None:
-        self.lu = None
+    def apply(self, operator: Factorization, r: np.ndarray) -> np.ndarray:
+        return operator.solve(r)
 
 
 class CGSolver(LinearSolver):

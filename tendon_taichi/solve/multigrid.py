@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics.model import Model
-from .direct import DirectSolver
+from .preconditioner import ReusedPreconditioner
 
 
 def rigid_modes(x: np.ndarray) -> np.ndarray:
@@ -35,49 +35,34 @@ def rigid_modes(x: np.ndarray) -> np.ndarray:
     return B
 
 
-class MultigridPreconditioner:
+class MultigridPreconditioner(ReusedPreconditioner):
     """M^-1 = one V-cycle (symmetric Gauss-Seidel smoothing, a direct solve on
     the coarsest level) of a smoothed-aggregation AMG hierarchy of the Hessian's
-    sparse part at a reference state; the interface of
-    :class:`~tendon_taichi.solve.cg.FactorPreconditioner`.
+    sparse part at a reference state; the same state gives the same hierarchy,
+    bit for bit (replays rely on it).
 
     ``refresh_iterations``: a solve that takes more iterations than this marks
     the hierarchy stale. A fresh hierarchy preconditions a tight (1e-8) solve on
-    t_shape to 26-60 iterations at levels 1-6, so the limit is higher than a
+    t_shape to 26-64 iterations at levels 1-6, so the limit is higher than a
     factorization's."""
 
     def __init__(self, model: Model, refresh_iterations: int = 80):
-        self.direct = DirectSolver(model, ordered=False)
-        self.refresh_iterations = refresh_iterations
-        self.cycle = None
+        super().__init__(model, refresh_iterations, ordered=False)
         self.levels = 0
-        self.projected = False
-        self.refreshes = 0
 
-    @property
-    def stale(self) -> bool:
-        return self.cycle is None
-
-    def refresh(self, project: bool = False) -> None:
-        """Build the hierarchy of the (exact or PSD-projected) Hessian at the model's
-        current state (this leaves the model's element tangents so: prepare them
-        again afterwards)."""
+    def build(self, project: bool):
         import pyamg  # half a second to import: only where this backend runs
 
         m = self.direct.model
         A = self.direct.assemble_ordered(project=project).Hp.tocsr()
         B = rigid_modes(m.positions()[~m.fixed])
+        # "local" weighting scales the prolongation smoother by row sums; the default
+        # estimates a spectral radius from a random start, which would make replays differ
         ml = pyamg.smoothed_aggregation_solver(A, B=B, symmetry="hermitian",
-                                               strength=("symmetric", {"theta": 0.0}))
-        self.cycle = ml.aspreconditioner(cycle="V")
+                                               strength=("symmetric", {"theta": 0.0}),
+                                               smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}))
         self.levels = len(ml.levels)
-        self.projected = project
-        self.refreshes += 1
+        return ml.aspreconditioner(cycle="V")
 
-    def __call__(self, r: np.ndarray) -> np.ndarray:
-        z = np.zeros_like(r)
-        z[self.direct.free] = self.cycle @ r[self.direct.free]
-        return z
-
-    def reset(self) -> None:
-        self.cycle = None
+    def apply(self, operator, r: np.ndarray) -> np.ndarray:
+        return operator @ r
