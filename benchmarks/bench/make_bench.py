@@ -38,7 +38,8 @@ measured by `tendon-taichi bench` (see `docs/cli.md`). This page and the files
 in `benchmarks/bench/` are written by `python benchmarks/bench/make_bench.py`;
 do not edit them by hand.
 
-Per level and linear backend, in seconds (medians of the repeats, compiling the
+Per level and linear backend (`cg`, `cg-amg` and `direct`, see the linear backends in
+`docs/method.md`), in seconds (medians of the repeats, compiling the
 Taichi kernels excluded): `eq cold`, one equilibrium from rest; `eq warm`, one
 from the equilibrium of a design whose contraction ratios differ by +-0.5 %;
 `Newton` and `CG it`, iterations cold/warm; `adjoint`, one adjoint solve;
