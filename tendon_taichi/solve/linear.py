@@ -31,10 +31,11 @@ SOLVERS = ("auto", "cg", "cg-amg", "cg-jacobi", "direct")
 
 #: ``auto`` takes the direct backend up to this many free DOFs and the
 #: factorization-preconditioned CG above. Measured on the 2-core CPU machine
-#: (t_shape): inside the optimizer direct is 5-30 % faster at levels 1-3
-#: (714-2716 DOFs) and even at level 4 (5336); single warm-started equilibria are
-#: faster with CG from level 3 on (level 5, 10504 DOFs: 194 ms against 305 ms).
-AUTO_DIRECT_MAX_DOFS = 5000
+#: (t_shape), inside the optimizer: direct is 5-30 % faster at levels 1-4
+#: (714-5336 DOFs) and, with the LDL^T factorization, 1.8x faster at level 5
+#: (10504 DOFs: 328 s against 594 s for the whole optimization); at level 6
+#: (20812 DOFs) one gradient is faster with CG (0.36 s against 0.51 s).
+AUTO_DIRECT_MAX_DOFS = 15000
 
 
 def resolve_solver(name: str, dofs: int) -> str:
