@@ -236,3 +236,34 @@ def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu():
     again = d.factorize(replace(H, Hp=sp.csc_matrix((2.0 * H.Hp.data, H.Hp.indices, H.Hp.indptr))))
     assert again.ldl is spd.ldl  # the same symbolic analysis, new numbers
     assert residual(again, 2.0 * H.Hp) < 1e-10 and residual(spd, H.Hp) < 1e-10  # spd made its own copy
+
+
+def test_a_tendon_robots_sparse_hessian_holds_every_entry_once():
+    """The direct backend's pattern of a tendon robot (the elements' part kept per
+    mesh, the segments' merged into it) assembles the same matrix as every element
+    and segment entry scattered and summed by scipy on the free DOFs, and holds
+    each distinct entry once."""
+    import scipy.sparse as sp
+
+    from tendon_taichi.extract.realizable import tendon_cables
+    from tendon_taichi.extract.routes import fit_route
+
+    p = build_problem(load_scene("t_shape"), 1)
+    t = np.linspace(0, 1, 12)
+    paths = [np.stack([0.04 * t, 0.075 - 0.004 * np.sin(np.pi * t)], 1),
+             np.stack([0.004 * np.sin(3 * t), 0.01 + 0.05 * t], 1)]
+    m = Model.from_problem(p, cables=tendon_cables(p, [fit_route(q, p.size, 0.4).tendon() for q in paths]))
+    NewtonSolver(m, "direct").solve(ac=0.05 * m.cables.a0, x0=p.mesh.nodes)
+    d = DirectSolver(m)
+    H = d.assemble_ordered()
+    T = p.mesh.triangles
+    edofs = (2 * T[:, :, None] + np.arange(2)).reshape(-1, 6)
+    rows = np.concatenate([np.repeat(edofs, 6, 1).ravel(), np.repeat(d.sdofs, 12, 1).ravel()])
+    cols = np.concatenate([np.tile(edofs, (1, 6)).ravel(), np.tile(d.sdofs, (1, 12)).ravel()])
+    n = 2 * m.n
+    free = np.flatnonzero(d.free)
+    expect = sp.coo_matrix((m.hessian_entries(), (rows, cols)), shape=(n, n)).tocsc()[free][:, free]
+    got = H.Hp[d.order][:, d.order]  # back to the free DOFs' own numbering
+    assert abs(got - expect).max() <= 1e-12 * abs(expect).max()
+    kept = d.free[rows] & d.free[cols]
+    assert d.nnz == len(np.unique(rows[kept] * n + cols[kept]))

@@ -148,3 +148,35 @@ def test_routes_do_not_depend_on_the_mesh():
     assert a.samples == b.samples == sample_count(a.length, 0.128)
     assert np.array_equal(a.control, b.control)
     assert isinstance(a, Route)
+
+
+def test_a_route_moved_across_triangles_gives_what_a_new_robot_gives():
+    """Route optimization keeps its robot when a step moves waypoints into other
+    triangles (the cables' incidences, the sparsity pattern and the capstan
+    weights are rebuilt in place): the soft IK's objective, gradient and adjoints
+    there are bit for bit those of a new robot of the same cables started from
+    the same equilibria."""
+    from tendon_taichi.optimizer.soft_ik import SoftIK
+
+    p = build_problem(load_scene("t_shape"), 1)
+    L = p.size
+    t = np.linspace(0, 1, 12)
+    routes = [fit_route(np.stack([0.04 * t, 0.075 - 0.004 * np.sin(np.pi * t)], 1), L, 0.4)]
+    rs = RouteSettings(friction=0.3, clearance=0.02 * L)
+    obj = RouteObjective(p, routes, p.scene.optimize, rs, "direct")
+    z0 = obj.pack(routes, np.array([[0.08]]))
+    obj.evaluate(z0)
+    ik, tri0, start = obj.ik, obj.ik.model.cables.points.tri.copy(), [x.copy() for x in obj.positions]
+    z1 = z0.copy()
+    z1[1:obj.n_control:2] -= 0.003 / L  # every control point 3 mm down
+    obj.evaluate(z1)
+    assert obj.ik is ik and not np.array_equal(ik.model.cables.points.tri, tri0)
+    fresh = SoftIK(p, p.scene.optimize, "direct", cables=ik.model.cables)
+    fresh.eval_tol = ik.eval_tol
+    for ps, x in zip(fresh.poses, start):
+        ps.model.set_positions(x)
+    f, g = fresh.evaluate(obj.unpack(z1)[1].ravel())
+    a, b = ik.poses[0].linear, fresh.poses[0].linear
+    assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
+    assert f == ik.last_value() and np.array_equal(g, ik._last[2])
+    assert all(np.array_equal(u, v) for u, v in zip(ik.adjoints, fresh.adjoints))

@@ -185,13 +185,17 @@ class RouteObjective:
     # ------------------------------------------------------------ evaluation
     def soft_ik(self, routes: list[Route]) -> SoftIK:
         """The as-built robot of these routes, warm started from the last positions:
-        the last one's models, their cables moved, while every waypoint stays in its
-        triangle (most steps), else a new one."""
+        the last one's models with their cables moved (the routes keep their
+        waypoint counts), else a new one."""
         last = self.ik
         cables = tendon_cables(self.problem, [r.tendon() for r in routes],
                                None if last is None else last.model.cables.points.tri)
-        if last is not None and np.array_equal(cables.points.tri, last.model.cables.points.tri):
+        if last is not None and np.array_equal(cables.start, last.model.cables.start):
+            retriangulated = not np.array_equal(cables.points.tri, last.model.cables.points.tri)
             last.move_cables(cables)
+            if retriangulated and self.positions is not None:  # as a new robot would start
+                for ps, x in zip(last.poses, self.positions):
+                    ps.model.set_positions(x)
             return last
         ik = SoftIK(self.problem, self.settings, self.solver, cables=cables)
         if self.eval_tol is not None:

@@ -230,9 +230,9 @@ class SoftIK:
                           if self.lattice or not term.lattice])
 
     def move_cables(self, cables) -> None:
-        """The realizable robot's cables (tendons) replaced by ``cables`` whose points
-        lie in the same triangles (:meth:`~tendon_taichi.physics.model.Model.move_cables`),
-        without rebuilding the models: positions stay as they are (warm starts)."""
+        """The realizable robot's cables (tendons) replaced by ``cables`` of the same
+        structure (:meth:`~tendon_taichi.physics.model.Model.move_cables`), without
+        rebuilding the models: positions stay as they are (warm starts)."""
         for ps in self.poses:
             ps.model.move_cables(cables)
             ps.linear.cables_moved()

@@ -150,6 +150,13 @@ def k_write(fb: F64, start: ti.i32, src: ti.types.ndarray(dtype=ti.f64, ndim=1))
 
 
 @ti.kernel
+def k_write_int(ib: I32, start: ti.i32, src: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    ti.loop_config(serialize=True)
+    for k in range(src.shape[0]):
+        ib[start + k] = src[k]
+
+
+@ti.kernel
 def k_read_ranges(fb: F64, ranges: ti.types.ndarray(dtype=ti.i32, ndim=2),
                    out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
     """out[dst:dst+len] = fb[start:start+len] for each row (start, len, dst)."""

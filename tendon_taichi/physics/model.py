@@ -18,7 +18,7 @@ from ..body.cables import CableSet
 from ..body.mesh import Mesh
 from ..body.scene import Material
 from . import forces, runtime
-from .buffers import k_copy_nodes, k_read, k_read_int, k_read_ranges, k_write
+from .buffers import k_copy_nodes, k_read, k_read_int, k_read_ranges, k_write, k_write_int
 from .capstan import Capstan, FrictionJacobian, PointMap
 from .layout import Scalar, Slot, allocate, csr
 from .runtime import ti
@@ -90,13 +90,9 @@ class Model:
         host.put_f64("EA", cab.stiffness)
         host.put_f64("SEG_WT", np.ones(self.S))
         host.put_f64("RHO", np.ones(self.C))
-        # node <- segment incidences: end b with +bary, end a with -bary
-        pt_nodes = T[cab.points.tri] if self.P else np.zeros((0, 3), np.int64)
-        nodes = np.concatenate([pt_nodes[cab.segments[:, e]].ravel() for e in (0, 1)])
-        segs = np.tile(np.repeat(np.arange(self.S), 3), 2)
-        start, self._ns_order = csr(nodes, self.n)
+        start, ns = self._incidences(cab)
         host.put_int("NS_START", start)
-        host.put_int("NS", segs[self._ns_order])
+        host.put_int("NS", ns)
         host.put_f64("NS_COEF", self._segment_coefficients(cab))
         so = self.offset["SCALARS"]
         host.fb[so + Scalar.MU], host.fb[so + Scalar.LAM], host.fb[so + Scalar.EPS] = mat.mu, mat.lam, self.eps
@@ -111,6 +107,17 @@ class Model:
         self.last_gradient = np.zeros(2 * self.n)
         self.ib.from_numpy(host.ib.astype(np.int32))
 
+    def _incidences(self, cab: CableSet) -> tuple[np.ndarray, np.ndarray]:
+        """The node <- segment incidences (end b with +bary, end a with -bary) in CSR
+        form: row starts (n+1,) and the segment of each entry (6 S,); keeps their
+        order for :meth:`_segment_coefficients`."""
+        T = self.mesh.triangles.astype(np.int64)
+        pt_nodes = T[cab.points.tri] if self.P else np.zeros((0, 3), np.int64)
+        nodes = np.concatenate([pt_nodes[cab.segments[:, e]].ravel() for e in (0, 1)])
+        segs = np.tile(np.repeat(np.arange(self.S), 3), 2)
+        start, self._ns_order = csr(nodes, self.n)
+        return start, segs[self._ns_order]
+
     def _segment_coefficients(self, cab: CableSet) -> np.ndarray:
         """The signed barycentric weight of every node-segment entry, in CSR order."""
         if not self.S:
@@ -119,14 +126,24 @@ class Model:
         return coefs[self._ns_order]
 
     def move_cables(self, cables: CableSet) -> None:
-        """Replace the cables by ``cables`` whose points lie in the same triangles
-        (only their barycentric weights and the rest lengths differ: a route moved
-        a little), in place; the positions and contractions stay."""
+        """Replace the cables by ``cables`` of the same structure (points, segments,
+        cables and friction; a route moved), in place; the positions and
+        contractions stay. Where a point moved to another triangle, the incidences
+        are rebuilt and the capstan weights start again from 1, as in a new model."""
         old = self.cables
-        if (cables.segments.shape != old.segments.shape or not np.array_equal(cables.points.tri, old.points.tri)
+        if (cables.segments.shape != old.segments.shape or cables.points.tri.shape != old.points.tri.shape
                 or not np.array_equal(cables.start, old.start) or cables.friction != old.friction):
-            raise ValueError("move_cables needs the same cables with their points in the same triangles")
+            raise ValueError("move_cables needs cables of the same structure")
+        moved = not np.array_equal(cables.points.tri, old.points.tri)
         self.cables = cables
+        if moved:
+            start, ns = self._incidences(cables)
+            seg_cable = np.repeat(np.arange(self.C), np.diff(cables.start))
+            for name, values in (("PT_TRI", cables.points.tri), ("NS_START", start), ("NS", ns),
+                                 ("SEG", np.column_stack([cables.segments, seg_cable]))):
+                self.write_int(name, values)
+            self.write("SEG_WT", np.ones(self.S))
+            self.write("RHO", np.ones(self.C))
         self.write("PT_BARY", cables.points.bary)
         self.write("NS_COEF", self._segment_coefficients(cables))
         self.write("A0", cables.a0)
@@ -147,6 +164,12 @@ class Model:
         v = np.ascontiguousarray(values, dtype=np.float64).ravel()
         if len(v):
             k_write(self.fb, self.offset[name] + at, v)
+
+    def write_int(self, name: str, values: np.ndarray, at: int = 0) -> None:
+        """Write ``values`` into i32 array ``name`` from entry ``at``."""
+        v = np.ascontiguousarray(values, dtype=np.int32).ravel()
+        if len(v):
+            k_write_int(self.ib, self.offset[name] + at, v)
 
     def read_many(self, items: list[tuple[str, int]]) -> list[np.ndarray]:
         """Several arrays (name, count) in one kernel launch."""

@@ -119,8 +119,20 @@ class Factorization:
         return self.solve_ordered(bp)[self.order]
 
 
-#: the elements' fill-reducing ordering per mesh and clamp set (shared by tendon layouts)
-_ELEMENT_ORDER: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+#: per mesh and clamp set, the elements' fill-reducing ordering and their sorted
+#: pattern keys with each entry's place among them (:class:`_ElementPattern`; shared by tendon layouts)
+_ELEMENT_PATTERN: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+@dataclass
+class _ElementPattern:
+    """The element entries' part of a tendon robot's pattern: ``order`` (nf,) the
+    fill-reducing ordering, ``keys`` the distinct sorted keys ``col nf + row`` of
+    the kept entries in that order, ``pos`` each kept entry's index in ``keys``."""
+
+    order: np.ndarray
+    keys: np.ndarray
+    pos: np.ndarray
 
 
 class DirectSolver(LinearSolver):
@@ -147,27 +159,31 @@ class DirectSolver(LinearSolver):
         m = self.model
         T = m.mesh.triangles
         cab = m.cables
+        self._tri = cab.points.tri.copy()
         edofs = (2 * T[:, :, None] + np.arange(2)).reshape(-1, 6)  # (m, 6)
         pt_nodes = T[cab.points.tri] if m.P else np.zeros((0, 3), np.int64)
         seg_nodes = np.concatenate([pt_nodes[cab.segments[:, 0]], pt_nodes[cab.segments[:, 1]]], 1)
         self.seg_coef = _segment_coefficients(cab)
         self.sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)  # (S, 12)
-        rows = [np.repeat(edofs, 6, axis=1).ravel(), np.repeat(self.sdofs, 12, axis=1).ravel()]
-        cols = [np.tile(edofs, (1, 6)).ravel(), np.tile(self.sdofs, (1, 12)).ravel()]
-        r, c = np.concatenate(rows), np.concatenate(cols)
         free_index = np.cumsum(self.free) - 1
-        self.keep = self.free[r] & self.free[c]
-        r, c = free_index[r[self.keep]], free_index[c[self.keep]]
         nf = int(self.free.sum())
-        if not self.ordered:  # the free DOFs' own numbering (for preconditioners that need no ordering)
-            self.order = np.arange(nf)
-        elif m.single:  # the fiber lattice: its own ordering
-            self.order = _fill_reducing_order(r, c, nf)
-        else:  # tendons: the elements' ordering (the segments add local couplings only)
-            self.order = self._element_order(edofs, free_index, nf)
-        r, c = self.order[r], self.order[c]
-        key = c.astype(np.int64) * nf + r
-        uniq, self.pos = np.unique(key, return_inverse=True)
+        re, ce = np.repeat(edofs, 6, axis=1).ravel(), np.tile(edofs, (1, 6)).ravel()
+        rs, cs = np.repeat(self.sdofs, 12, axis=1).ravel(), np.tile(self.sdofs, (1, 12)).ravel()
+        keep_e, keep_s = self.free[re] & self.free[ce], self.free[rs] & self.free[cs]
+        self.keep = np.concatenate([keep_e, keep_s])
+        re, ce = free_index[re[keep_e]], free_index[ce[keep_e]]
+        rs, cs = free_index[rs[keep_s]], free_index[cs[keep_s]]
+        if self.ordered and not m.single:  # tendons: the elements' ordering (the segments add local couplings)
+            elements = self._element_pattern(re, ce, nf)
+            self.order = elements.order
+            uniq, self.pos = _merged(elements, self.order[cs].astype(np.int64) * nf + self.order[rs])
+        else:
+            r, c = np.concatenate([re, rs]), np.concatenate([ce, cs])
+            if not self.ordered:  # the free DOFs' own numbering (for preconditioners that need no ordering)
+                self.order = np.arange(nf)
+            else:  # the fiber lattice: its own ordering
+                self.order = _fill_reducing_order(r, c, nf)
+            uniq, self.pos = np.unique(self.order[c].astype(np.int64) * nf + self.order[r], return_inverse=True)
         self.indices = (uniq % nf).astype(np.int32)
         self.indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
         self.shape = (nf, nf)
@@ -175,19 +191,24 @@ class DirectSolver(LinearSolver):
         self.ldl: LDL | None = None  # made with the first factorization
 
     def cables_moved(self) -> None:
-        """New barycentric weights of the cables' points (the same triangles: the
-        sparsity pattern holds); the last factorization is forgotten."""
-        self.seg_coef = _segment_coefficients(self.model.cables)
+        """The model's cables moved (:meth:`~tendon_taichi.physics.model.Model.move_cables`):
+        new barycentric weights, and where a point moved to another triangle a new
+        sparsity pattern; the last factorization is forgotten."""
+        if np.array_equal(self.model.cables.points.tri, self._tri):
+            self.seg_coef = _segment_coefficients(self.model.cables)
+        else:
+            self._build_structure()
         self.reset()
 
-    def _element_order(self, edofs: np.ndarray, free_index: np.ndarray, nf: int) -> np.ndarray:
-        mesh = self.model.mesh
+    def _element_pattern(self, r: np.ndarray, c: np.ndarray, nf: int) -> _ElementPattern:
+        """The elements' pattern (kept entries ``r``, ``c`` in the free numbering),
+        computed once per mesh and clamp set."""
+        cache = _ELEMENT_PATTERN.setdefault(self.model.mesh, {})
         key = self.free.tobytes()
-        cache = _ELEMENT_ORDER.setdefault(mesh, {})
         if key not in cache:
-            r, c = np.repeat(edofs, 6, axis=1).ravel(), np.tile(edofs, (1, 6)).ravel()
-            keep = self.free[r] & self.free[c]
-            cache[key] = _fill_reducing_order(free_index[r[keep]], free_index[c[keep]], nf)
+            order = _fill_reducing_order(r, c, nf)
+            keys, pos = np.unique(order[c].astype(np.int64) * nf + order[r], return_inverse=True)
+            cache[key] = _ElementPattern(order, keys, pos)
         return cache[key]
 
     def _low_rank(self) -> tuple[np.ndarray, np.ndarray]:
@@ -310,6 +331,20 @@ class DirectSolver(LinearSolver):
         factorization (one triangular solve each)."""
         for j, b in enumerate(rhs):
             yield self.solve(b, tol=tol) if j == 0 else self.resolve(b)
+
+
+def _merged(elements: _ElementPattern, seg_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What ``np.unique(concatenate([element keys, seg_keys]), return_inverse=True)``
+    gives - the distinct sorted keys and each entry's index among them - without
+    sorting the elements' keys again: the segments' new keys are inserted."""
+    seg_uniq = np.unique(seg_keys)
+    at = np.searchsorted(elements.keys, seg_uniq)
+    known = (at < len(elements.keys)) & (elements.keys[np.minimum(at, len(elements.keys) - 1)] == seg_uniq)
+    new = seg_uniq[~known]
+    keys = np.insert(elements.keys, at[~known], new)
+    shift = np.searchsorted(new, elements.keys)  # new keys below each element key
+    pos = np.concatenate([elements.pos + shift[elements.pos], np.searchsorted(keys, seg_keys)])
+    return keys, pos
 
 
 def _fill_reducing_order(rows: np.ndarray, cols: np.ndarray, n: int) -> np.ndarray:

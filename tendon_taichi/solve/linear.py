@@ -96,6 +96,6 @@ class LinearSolver(ABC):
         """Forget reused state (a stage start must not depend on earlier stages)."""
 
     def cables_moved(self) -> None:
-        """The model's cables moved within their triangles (:meth:`~tendon_taichi.physics.model.Model.move_cables`):
+        """The model's cables moved (:meth:`~tendon_taichi.physics.model.Model.move_cables`):
         forget what depended on them."""
         self.reset()
