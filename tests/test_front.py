@@ -207,3 +207,30 @@ def _planted_tendons(p, st):
     from conftest import lattice_path
 
     return _tendons(p, [lattice_path(p, [np.array(q) for q in line]) for line in LINES], st)
+
+
+def test_the_descent_reduces_finished_layouts(searched, monkeypatch):
+    """Where finishing the two-tendon layouts left a poor one (here: the
+    one-tendon layout and a slack route - no better than one tendon), the
+    descent from the finished three-tendon layout finds both planted routes by
+    a drop or a join; without the descent the poor layout stays."""
+    from dataclasses import replace
+
+    import tendon_taichi.extract.front as front_module
+
+    p, st, greedy, searched_front = searched
+    real = front_module._finished
+    one = searched_front.layouts[1].routes
+
+    def finished(search, layout, rounds):
+        if layout.count == 2 and rounds == OPTIONS.refine:  # the bottom-up pass, not the descent
+            return replace(_with_a_slack_route(p, st, search, one), optimized=True, source="test")
+        return real(search, layout, rounds)
+
+    monkeypatch.setattr(front_module, "_finished", finished)
+    front = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
+    assert front.layouts[2].error < 1e-3 and front.layouts[2].source != "test"
+    assert recommend(front_rows(front, None, 0.0, 30.0), 0.005)["count"] == 2
+    monkeypatch.setattr(front_module, "_descend", lambda *args: None)
+    poor = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
+    assert poor.layouts[2].source == "test" and poor.layouts[2].error > 0.005

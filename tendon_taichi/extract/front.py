@@ -34,7 +34,16 @@ tendons together:
 * **slack routes**: a finished layout whose routes include slack ones (no
   tension in any pose, :func:`slack_routes`) is the same robot without them,
   and that smaller layout replaces the front's of its count when its as-built
-  error is lower.
+  error is lower;
+* **descent** (:func:`_descend`): from the most tendons down, each count's
+  finished layout is reduced by every drop and smooth join (screened, the best
+  solved in full); where the least costly reduction, as it is, already costs
+  less than the layout held for the count below, it is finished (one round)
+  and replaces that layout when it still costs less. The beam reduced the
+  layouts as extracted, before route optimization moved their routes; a
+  finished layout is a better start, and which of the two leads to the best
+  smaller layout depends on the lattice. The monotone repair then runs again
+  above each count the descent changed.
 
 Because a greedy layout of each count is among the seeds, the front is never
 worse than greedy consolidation at any count (in effective error).
@@ -209,6 +218,7 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
                     f"{smaller.count}-tendon layout of {100 * smaller.error:.2f}% of L")
                 front.layouts[smaller.count] = smaller
         within = any(m.error <= options.budget for m in front.layouts.values())
+    _descend(search, front, pool, size, say)
     front.evaluations, front.screened = tally.evaluations, tally.screened
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
     front.time_s = time.perf_counter() - t0
@@ -341,6 +351,35 @@ def _one_more(search: _Search, below: Layout, pool: list[Route], now: Layout, si
     """The best (as built) of ``now`` and the layout ``below`` (one tendon fewer)
     with one more pooled route (:func:`_with_one_more`)."""
     return min([now] + _with_one_more(search, below, pool, size), key=lambda lay: lay.error)
+
+
+def _descend(search: _Search, front: Front, pool: list[Route], size: float,
+             say: Callable[[str], None]) -> None:
+    """The front's descent (module docstring), in place: for k from the most
+    tendons down to 2, the least costly drop or join of ``front.layouts[k]``
+    (:meth:`~.consolidation._Search.ranked`) is finished (one round) where it
+    costs less than the (k - 1)-tendon layout held, and replaces that layout
+    when it still does; then, above each count it replaced, the monotone repair
+    (:func:`_one_more`) where that count's error exceeds the new one's."""
+    changed = set()
+    for k in sorted(front.layouts, reverse=True):
+        held = front.layouts.get(k - 1)
+        if k == 1 or held is None:
+            continue
+        above = front.layouts[k]
+        ranked = search.ranked(search.reductions(above), above)
+        if not ranked or ranked[0][1].cost >= held.cost:
+            continue
+        lay = _finished(search, replace(ranked[0][1], source=sources(ranked[0][1].routes)), 1)
+        if lay.cost < held.cost:
+            say(f"front: a {k - 1}-tendon layout from the {k}-tendon one, {100 * lay.error:.2f}% of L "
+                f"(was {100 * held.error:.2f}%)")
+            front.layouts[k - 1] = lay
+            changed.add(k - 1)
+    for k in sorted(changed):
+        above = front.layouts.get(k + 1)
+        if above is not None and above.error > front.layouts[k].error + PRECISION:
+            front.layouts[k + 1] = _one_more(search, front.layouts[k], pool, above, size)
 
 
 def pose_only_state(problem: Problem) -> IdealizedState:
