@@ -168,6 +168,17 @@ def k_read_ranges(fb: F64, ranges: ti.types.ndarray(dtype=ti.i32, ndim=2),
 
 
 @ti.kernel
+def k_write_ranges(fb: F64, ranges: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                   src: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+    """fb[start:start+len] = src[at:at+len] for each row (start, len, at)."""
+    ti.loop_config(serialize=True)
+    for r in range(ranges.shape[0]):
+        start, length, at = ranges[r, 0], ranges[r, 1], ranges[r, 2]
+        for k in range(length):
+            fb[start + k] = src[at + k]
+
+
+@ti.kernel
 def k_read_int(ib: I32, start: ti.i32) -> ti.i32:
     return ib[start]
 

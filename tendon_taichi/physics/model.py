@@ -18,7 +18,7 @@ from ..body.cables import CableSet
 from ..body.mesh import Mesh
 from ..body.scene import Material
 from . import forces, runtime
-from .buffers import k_copy_nodes, k_read, k_read_int, k_read_ranges, k_write, k_write_int
+from .buffers import k_copy_nodes, k_read, k_read_int, k_read_ranges, k_write, k_write_int, k_write_ranges
 from .capstan import Capstan, FrictionJacobian, PointMap
 from .layout import Scalar, Slot, allocate, csr
 from .runtime import ti
@@ -90,6 +90,7 @@ class Model:
         host.put_f64("EA", cab.stiffness)
         host.put_f64("SEG_WT", np.ones(self.S))
         host.put_f64("RHO", np.ones(self.C))
+        self._weights = np.ones(self.S)  # what SEG_WT holds (only the host writes it)
         start, ns = self._incidences(cab)
         host.put_int("NS_START", start)
         host.put_int("NS", ns)
@@ -142,8 +143,8 @@ class Model:
             for name, values in (("PT_TRI", cables.points.tri), ("NS_START", start), ("NS", ns),
                                  ("SEG", np.column_stack([cables.segments, seg_cable]))):
                 self.write_int(name, values)
-            self.write("SEG_WT", np.ones(self.S))
-            self.write("RHO", np.ones(self.C))
+            self._weights = np.ones(self.S)
+            self.write_many([("SEG_WT", self._weights), ("RHO", np.ones(self.C))])
         self.write("PT_BARY", cables.points.bary)
         self.write("NS_COEF", self._segment_coefficients(cables))
         self.write("A0", cables.a0)
@@ -180,6 +181,15 @@ class Model:
         if len(out):
             k_read_ranges(self.fb, ranges, out)
         return [out[a:b] for a, b in zip(dst[:-1], dst[1:])]
+
+    def write_many(self, items: list[tuple[str, np.ndarray]]) -> None:
+        """Several arrays (name, values) written in one kernel launch."""
+        values = [np.ascontiguousarray(v, dtype=np.float64).ravel() for _, v in items]
+        counts = [len(v) for v in values]
+        at = np.concatenate([[0], np.cumsum(counts)])
+        ranges = np.array([[self.offset[n], c, a] for (n, _), c, a in zip(items, counts, at[:-1])], dtype=np.int32)
+        if at[-1]:
+            k_write_ranges(self.fb, ranges, np.concatenate(values))
 
     def read_int(self, name: str, at: int = 0) -> int:
         """Entry ``at`` of the i32 array ``name``."""
@@ -288,9 +298,9 @@ class Model:
         if self.capstan is None:
             return 0.0
         st = self.capstan.state(self.cable_points())
-        change = float(np.abs(st.w - self.read("SEG_WT", self.S)).max(initial=0.0))
-        self.write("SEG_WT", st.w)
-        self.write("RHO", st.rho)
+        change = float(np.abs(st.w - self._weights).max(initial=0.0))
+        self._weights = np.array(st.w, dtype=np.float64)
+        self.write_many([("SEG_WT", self._weights), ("RHO", st.rho)])
         return change
 
     def segment_tensions(self) -> np.ndarray:
