@@ -4,6 +4,7 @@ position), deterministic reductions over fixed blocks, and the copy kernels
 that move arrays between the buffers and numpy."""
 
 from .energies import mat2, mat4
+from .launch import kernel
 from .layout import BLOCKS, CGState, Scalar, Slot
 from .runtime import ti
 
@@ -128,35 +129,35 @@ def sum_array(fb: ti.template(), ib: ti.template(), slot, count, out, serial: ti
 
 
 # ---------------------------------------------------------------- copies between the buffers and numpy
-@ti.kernel
+@kernel
 def k_copy_nodes(fb: F64, ib: I32, src: ti.i32, dst: ti.i32, serial: ti.template()):
     ti.loop_config(serialize=serial)
     for i in range(ib[Slot.N]):
         set_v(fb, ib, dst, i, get_v(fb, ib, src, i))
 
 
-@ti.kernel
+@kernel
 def k_read(fb: F64, start: ti.i32, out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
     ti.loop_config(serialize=True)
     for k in range(out.shape[0]):
         out[k] = fb[start + k]
 
 
-@ti.kernel
+@kernel
 def k_write(fb: F64, start: ti.i32, src: ti.types.ndarray(dtype=ti.f64, ndim=1)):
     ti.loop_config(serialize=True)
     for k in range(src.shape[0]):
         fb[start + k] = src[k]
 
 
-@ti.kernel
+@kernel
 def k_write_int(ib: I32, start: ti.i32, src: ti.types.ndarray(dtype=ti.i32, ndim=1)):
     ti.loop_config(serialize=True)
     for k in range(src.shape[0]):
         ib[start + k] = src[k]
 
 
-@ti.kernel
+@kernel
 def k_read_ranges(fb: F64, ranges: ti.types.ndarray(dtype=ti.i32, ndim=2),
                    out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
     """out[dst:dst+len] = fb[start:start+len] for each row (start, len, dst)."""
@@ -167,7 +168,7 @@ def k_read_ranges(fb: F64, ranges: ti.types.ndarray(dtype=ti.i32, ndim=2),
             out[dst + k] = fb[start + k]
 
 
-@ti.kernel
+@kernel
 def k_write_ranges(fb: F64, ranges: ti.types.ndarray(dtype=ti.i32, ndim=2),
                    src: ti.types.ndarray(dtype=ti.f64, ndim=1)):
     """fb[start:start+len] = src[at:at+len] for each row (start, len, at)."""
@@ -178,7 +179,7 @@ def k_write_ranges(fb: F64, ranges: ti.types.ndarray(dtype=ti.i32, ndim=2),
             fb[start + k] = src[at + k]
 
 
-@ti.kernel
+@kernel
 def k_read_int(ib: I32, start: ti.i32) -> ti.i32:
     return ib[start]
 

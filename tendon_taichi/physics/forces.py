@@ -28,6 +28,7 @@ from .buffers import (F64, I32, dot_nodes, get_f, get_m2, get_m4, get_sc, get_v,
                       set_v, sum_array, vec2)
 from .energies import (mat2, neo_hookean_dPdF, neo_hookean_P, neo_hookean_psi, project_psd4, spd_inverse2,
                        tangent_apply, zcq, zcq_d1, zcq_d2)
+from .launch import kernel
 from .layout import Scalar, Slot
 from .runtime import ti
 
@@ -287,13 +288,13 @@ def apply_hessian(fb: ti.template(), ib: ti.template(), src, dst, masked: ti.tem
 
 
 # ---------------------------------------------------------------- kernels
-@ti.kernel
+@kernel
 def k_energy(fb: F64, ib: I32, xslot: ti.i32, serial: ti.template()) -> vec2:
     energy(fb, ib, xslot, serial)
     return vec2(get_sc(fb, ib, Scalar.S0), get_sc(fb, ib, Scalar.JMIN))
 
 
-@ti.kernel
+@kernel
 def k_gradient(fb: F64, ib: I32, g_out: ti.types.ndarray(dtype=ti.f64, ndim=1),
                 serial: ti.template()) -> ti.f64:
     """G = dE_tot/dx (also copied to g_out as 2n values); returns |G_free|^2."""
@@ -305,7 +306,7 @@ def k_gradient(fb: F64, ib: I32, g_out: ti.types.ndarray(dtype=ti.f64, ndim=1),
     return get_sc(fb, ib, Scalar.S0)
 
 
-@ti.kernel
+@kernel
 def k_hessian(fb: F64, ib: I32, project: ti.i32, serial: ti.template()):
     hessian(fb, ib, project, serial)
 
@@ -321,7 +322,7 @@ def shape_gradient(B: mat2, a) -> vec2:
     return g
 
 
-@ti.kernel
+@kernel
 def k_hessian_entries(fb: F64, ib: I32, out: ti.types.ndarray(dtype=ti.f64, ndim=1),
                        serial: ti.template()):
     """The Hessian's element blocks (36 per element, (6, 6) row-major over the
@@ -363,17 +364,17 @@ def k_hessian_entries(fb: F64, ib: I32, out: ti.types.ndarray(dtype=ti.f64, ndim
                 out[base + 144 * s + 12 * (2 * a + i) + 2 * b + j] = cab * K[i, j]
 
 
-@ti.kernel
+@kernel
 def k_hessian_product(fb: F64, ib: I32, serial: ti.template()):
     apply_hessian(fb, ib, Slot.VIN, Slot.VOUT, False, serial)
 
 
-@ti.kernel
+@kernel
 def k_update_cables(fb: F64, ib: I32, serial: ti.template()):
     update_cables(fb, ib, Slot.X, serial)
 
 
-@ti.kernel
+@kernel
 def k_cables_to_nodes(fb: F64, ib: I32, serial: ti.template()):
     """VOUT = sum_c CCOEF_c dL_c/dx."""
     update_cables(fb, ib, Slot.X, serial)
@@ -381,7 +382,7 @@ def k_cables_to_nodes(fb: F64, ib: I32, serial: ti.template()):
     gather(fb, ib, Slot.VOUT, False, False, serial)
 
 
-@ti.kernel
+@kernel
 def k_nodes_to_cables(fb: F64, ib: I32, serial: ti.template()):
     """CW = dL_c/dx . VIN."""
     update_cables(fb, ib, Slot.X, serial)

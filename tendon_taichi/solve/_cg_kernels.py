@@ -7,6 +7,7 @@ a preconditioner applied on the host takes three launches per iteration."""
 from ..physics.buffers import (F64, I32, NDARRAY, dot_nodes, get_cg, get_m2, get_sc, get_v, set_cg, set_sc,
                                set_v, vec2)
 from ..physics.forces import apply_hessian
+from ..physics.launch import kernel
 from ..physics.layout import CGState, Scalar, Slot
 from ..physics.runtime import ti
 
@@ -80,13 +81,13 @@ def cg_iteration(fb: ti.template(), ib: ti.template(), serial: ti.template()):
         set_v(fb, ib, Slot.CP, i, get_v(fb, ib, Slot.CZ, i) + beta * get_v(fb, ib, Slot.CP, i))
 
 
-@ti.kernel
+@kernel
 def k_cg_begin(fb: F64, ib: I32, warm: ti.i32, tol: ti.f64, serial: ti.template()) -> ti.i32:
     cg_begin(fb, ib, warm, tol, serial)
     return get_cg(ib, CGState.DONE)
 
 
-@ti.kernel
+@kernel
 def k_cg_run(fb: F64, ib: I32, iterations: ti.i32) -> ti.i32:
     """A whole PCG solve in one launch (serialized models)."""
     ti.loop_config(serialize=True)
@@ -96,20 +97,20 @@ def k_cg_run(fb: F64, ib: I32, iterations: ti.i32) -> ti.i32:
     return get_cg(ib, CGState.DONE)
 
 
-@ti.kernel
+@kernel
 def k_cg_step(fb: F64, ib: I32):
     """One PCG iteration with parallel loops."""
     cg_iteration(fb, ib, False)
 
 
-@ti.kernel
+@kernel
 def k_cg_done(ib: I32) -> ti.i32:
     return get_cg(ib, CGState.DONE)
 
 
 # PCG driven from the host, for a preconditioner applied there (a factorization):
 # three launches per iteration, the residual going out and the preconditioned one in.
-@ti.kernel
+@kernel
 def k_pcg_begin(fb: F64, ib: I32, warm: ti.i32, r_out: NDARRAY, serial: ti.template()) -> vec2:
     """CR = CB - H CX0 (copied to r_out as 2n values); returns (|CB|^2, |CR|^2)."""
     cg_residual(fb, ib, warm, serial)
@@ -120,7 +121,7 @@ def k_pcg_begin(fb: F64, ib: I32, warm: ti.i32, r_out: NDARRAY, serial: ti.templ
     return vec2(get_sc(fb, ib, Scalar.BB), get_sc(fb, ib, Scalar.RR))
 
 
-@ti.kernel
+@kernel
 def k_pcg_matvec(fb: F64, ib: I32, serial: ti.template()) -> ti.f64:
     """CQ = H CP on the free DOFs; returns CP . CQ."""
     apply_hessian(fb, ib, Slot.CP, Slot.CQ, True, serial)
@@ -128,7 +129,7 @@ def k_pcg_matvec(fb: F64, ib: I32, serial: ti.template()) -> ti.f64:
     return get_sc(fb, ib, Scalar.PQ)
 
 
-@ti.kernel
+@kernel
 def k_pcg_update(fb: F64, ib: I32, alpha: ti.f64, r_out: NDARRAY, serial: ti.template()) -> ti.f64:
     """CX += alpha CP, CR -= alpha CQ (copied to r_out); returns |CR|^2."""
     ti.loop_config(serialize=serial)
@@ -141,7 +142,7 @@ def k_pcg_update(fb: F64, ib: I32, alpha: ti.f64, r_out: NDARRAY, serial: ti.tem
     return get_sc(fb, ib, Scalar.RR)
 
 
-@ti.kernel
+@kernel
 def k_pcg_direction(fb: F64, ib: I32, z_in: NDARRAY, beta: ti.f64, serial: ti.template()):
     """CP = z + beta CP with z the preconditioned residual (masked)."""
     ti.loop_config(serialize=serial)

@@ -6,11 +6,12 @@ import numpy as np
 
 from ..physics.buffers import F64, I32, NDARRAY, dot_nodes, get_sc, get_v, k_copy_nodes, set_v, vec2
 from ..physics.forces import energy
+from ..physics.launch import kernel
 from ..physics.layout import Scalar, Slot
 from ..physics.runtime import ti
 
 
-@ti.kernel
+@kernel
 def k_newton_rhs(fb: F64, ib: I32, serial: ti.template()):
     """CB = -G on the free DOFs."""
     ti.loop_config(serialize=serial)
@@ -18,7 +19,7 @@ def k_newton_rhs(fb: F64, ib: I32, serial: ti.template()):
         set_v(fb, ib, Slot.CB, i, -get_v(fb, ib, Slot.G, i) * get_v(fb, ib, Slot.MASK, i))
 
 
-@ti.kernel
+@kernel
 def k_take_direction(fb: F64, ib: I32, from_cg: ti.i32, serial: ti.template()) -> ti.f64:
     """DX = CX (or CB) on the free DOFs; return G . DX."""
     ti.loop_config(serialize=serial)
@@ -31,7 +32,7 @@ def k_take_direction(fb: F64, ib: I32, from_cg: ti.i32, serial: ti.template()) -
     return get_sc(fb, ib, Scalar.S0)
 
 
-@ti.kernel
+@kernel
 def k_direction_from(fb: F64, ib: I32, d_in: NDARRAY, serial: ti.template()) -> ti.f64:
     """DX = d (2n values from the host) on the free DOFs; return G . DX."""
     ti.loop_config(serialize=serial)
@@ -41,7 +42,7 @@ def k_direction_from(fb: F64, ib: I32, d_in: NDARRAY, serial: ti.template()) -> 
     return get_sc(fb, ib, Scalar.S0)
 
 
-@ti.kernel
+@kernel
 def k_trial(fb: F64, ib: I32, alpha: ti.f64, serial: ti.template()) -> vec2:
     """XT = X + alpha DX; returns (E_tot, min det fb) at XT."""
     ti.loop_config(serialize=serial)
