@@ -364,7 +364,7 @@ def _descend(search: _Search, front: Front, pool: list[Route], size: float,
     changed = set()
     for k in sorted(front.layouts, reverse=True):
         held = front.layouts.get(k - 1)
-        if k == 1 or held is None:
+        if held is None:
             continue
         above = front.layouts[k]
         ranked = search.ranked(search.reductions(above), above)

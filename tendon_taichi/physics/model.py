@@ -132,16 +132,14 @@ class Model:
         contractions stay. Where a point moved to another triangle, the incidences
         are rebuilt and the capstan weights start again from 1, as in a new model."""
         old = self.cables
-        if (cables.segments.shape != old.segments.shape or cables.points.tri.shape != old.points.tri.shape
+        if (not np.array_equal(cables.segments, old.segments) or cables.points.tri.shape != old.points.tri.shape
                 or not np.array_equal(cables.start, old.start) or cables.friction != old.friction):
             raise ValueError("move_cables needs cables of the same structure")
         moved = not np.array_equal(cables.points.tri, old.points.tri)
         self.cables = cables
         if moved:
             start, ns = self._incidences(cables)
-            seg_cable = np.repeat(np.arange(self.C), np.diff(cables.start))
-            for name, values in (("PT_TRI", cables.points.tri), ("NS_START", start), ("NS", ns),
-                                 ("SEG", np.column_stack([cables.segments, seg_cable]))):
+            for name, values in (("PT_TRI", cables.points.tri), ("NS_START", start), ("NS", ns)):
                 self.write_int(name, values)
             self._weights = np.ones(self.S)
             self.write_many([("SEG_WT", self._weights), ("RHO", np.ones(self.C))])
