@@ -234,3 +234,40 @@ def test_the_descent_reduces_finished_layouts(searched, monkeypatch):
     monkeypatch.setattr(front_module, "_descend", lambda *args: None)
     poor = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
     assert poor.layouts[2].source == "test" and poor.layouts[2].error > 0.005
+
+
+def test_the_finer_mesh_chooses_among_each_counts_finished_layouts(searched):
+    """Where the two-tendon layout held is a poor one (the one-tendon layout and a
+    slack route) and both planted routes were finished too, the finer mesh
+    chooses them; at every count the layout kept costs no more there than any
+    other finished one, each solved there alone. Without the others to choose
+    from, the poor layout stays."""
+    from dataclasses import replace
+
+    from tendon_taichi import build_problem
+    from tendon_taichi.extract.consolidation import _Search, route_settings
+
+    p, st, _, searched_front = searched
+    search = _Search(p, st, p.scene.optimize, "direct", OPTIONS, route_settings(p, OPTIONS), "test", None)
+    poor = replace(_with_a_slack_route(p, st, search, searched_front.layouts[1].routes), optimized=True, source="test")
+    good = searched_front.layouts[2]
+    fine = replace(build_problem(p.scene, 2), target_goal=p.target_goal)
+
+    def front_with(finished_two):
+        front = replace(searched_front, layouts={**searched_front.layouts, 2: poor},
+                        finished={k: list(v) for k, v in searched_front.finished.items()})
+        front.finished[2] = finished_two
+        return front
+
+    front = front_with([poor, good])
+    res = converge_front(front, p, st, fine, p.scene.optimize, OPTIONS, "direct")
+    assert front.layouts[2] is good and res[2].pose_error_rel < 1e-3
+    fine_state = pose_only_state(fine)
+    for k, members in front.finished.items():
+        kept = search.cost(front.layouts[k].routes, res[k].pose_error_rel)
+        for lay in members:
+            alone = converged_error(fine, lay, fine_state, p.scene.optimize, "direct")
+            assert kept <= search.cost(lay.routes, alone.pose_error_rel) * (1 + 1e-6) + 1e-12, (k, lay.source)
+    stuck = front_with([poor])
+    res = converge_front(stuck, p, st, fine, p.scene.optimize, OPTIONS, "direct")
+    assert stuck.layouts[2] is poor and res[2].pose_error_rel > 0.005

@@ -45,9 +45,15 @@ tendons together:
   smaller layout depends on the lattice. The monotone repair then runs again
   above each count the descent changed.
 
+Every layout finished on the way is kept (``Front.finished``): on the design
+mesh several often tie, and :func:`converge_front` lets the finer mesh choose.
+
 Because a greedy layout of each count is among the seeds, the front is never
 worse than greedy consolidation at any count (in effective error).
-:func:`converge_front` then solves each layout on a finer mesh, where the same
+:func:`converge_front` then solves every finished layout of each count on a
+finer mesh and keeps the least costly there - the figure reported is that
+mesh's, and a layout that reaches the goals only on the design mesh's lattice
+(many can, at a few tendons) loses to one that reaches them on both; the same
 monotone repair applies to the errors reported.
 """
 
@@ -90,12 +96,14 @@ SLACK = 1e-6
 @dataclass
 class Front:
     """The best layout found per tendon count (``layouts``, finished; counts from 1),
-    and what the search cost: ``seeds`` layouts it started from, ``pool`` distinct
+    every layout finished per count (``finished``, the best among them), and what
+    the search cost: ``seeds`` layouts it started from, ``pool`` distinct
     routes (``routes``), ``evaluations`` layouts solved in full, ``screened``
     candidates screened, ``route_evaluations`` equilibria of route optimization in
     ``route_s`` seconds, ``time_s`` in all."""
 
     layouts: dict[int, Layout] = field(default_factory=dict)
+    finished: dict[int, list[Layout]] = field(default_factory=dict)
     seeds: int = 0
     pool: int = 0
     routes: list[Route] = field(default_factory=list)
@@ -104,6 +112,13 @@ class Front:
     route_evaluations: int = 0
     route_s: float = 0.0
     time_s: float = 0.0
+
+    def offer(self, layouts: list[Layout], size: float) -> None:
+        """Keep ``layouts`` among the finished of their counts, each distinct one once."""
+        for lay in layouts:
+            held = self.finished.setdefault(lay.count, [])
+            if _key(lay, size) not in {_key(h, size) for h in held}:
+                held.append(lay)
 
     def as_json(self) -> dict:
         return {"counts": sorted(self.layouts), "seeds": self.seeds, "pool": self.pool,
@@ -207,11 +222,14 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
         members = _best(by_count[k], 1, size) if within else by_count[k]
         say(f"front: optimizing the routes of the {'best' if len(members) == 1 else len(members)} "
             f"{k}-tendon layout{'s' if len(members) > 1 else ''}")
-        lay = min((_finished(search, m, 1 if within else options.refine) for m in members), key=lambda m: m.cost)
+        done = [_finished(search, m, 1 if within else options.refine) for m in members]
+        lay = min(done, key=lambda m: m.cost)
         if k > 1 and k - 1 in front.layouts and lay.error > front.layouts[k - 1].error + PRECISION:
             lay = _one_more(search, front.layouts[k - 1], pool, lay, size)
         front.layouts[k] = lay
+        front.offer([lay] + done, size)
         for smaller in _without_slack(search, lay):  # the same robot with fewer tendons
+            front.offer([smaller], size)
             held = front.layouts.get(smaller.count)
             if held is None or smaller.error < held.error - PRECISION:
                 say(f"front: {lay.count - smaller.count} of the {lay.count} routes are slack; the rest make a "
@@ -371,6 +389,7 @@ def _descend(search: _Search, front: Front, pool: list[Route], size: float,
         if not ranked or ranked[0][1].cost >= held.cost:
             continue
         lay = _finished(search, replace(ranked[0][1], source=sources(ranked[0][1].routes)), 1)
+        front.offer([lay], size)
         if lay.cost < held.cost:
             say(f"front: a {k - 1}-tendon layout from the {k}-tendon one, {100 * lay.error:.2f}% of L "
                 f"(was {100 * held.error:.2f}%)")
@@ -380,6 +399,7 @@ def _descend(search: _Search, front: Front, pool: list[Route], size: float,
         above = front.layouts.get(k + 1)
         if above is not None and above.error > front.layouts[k].error + PRECISION:
             front.layouts[k + 1] = _one_more(search, front.layouts[k], pool, above, size)
+            front.offer([front.layouts[k + 1]], size)
 
 
 def pose_only_state(problem: Problem) -> IdealizedState:
@@ -403,16 +423,20 @@ def converged_error(fine: Problem, layout: Layout, state: IdealizedState, settin
 def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: Problem, settings: OptimizeSettings,
                    options: ConsolidationSettings, solver: str = "auto",
                    log: Callable[[str], None] | None = None) -> dict[int, RealizableResult | None]:
-    """Each front layout's as-built robot on the finer mesh ``fine``
-    (:func:`converged_error`; None where it cannot be solved), kept monotone there:
-    where a count's error is above the count below's by more than ``PRECISION``,
-    that smaller layout with one more pooled route (the best on ``problem``'s mesh
-    from each start, :func:`_with_one_more`, where that keeps the front on
-    ``problem``'s mesh monotone) is solved on ``fine`` as well and replaces the
-    front's layout when it does better there."""
+    """Each count's layouts on the finer mesh ``fine`` (:func:`converged_error`; None
+    where none can be solved), in place: of the layout held and every other one
+    finished for that count (``front.finished``), the least costly there (its pose
+    error there squared plus its routes' shape cost; the one held on ties) becomes
+    the count's. The front is then kept monotone there: where a count's error is
+    above the count below's by more than ``PRECISION``, that smaller layout with
+    one more pooled route (the best on ``problem``'s mesh from each start,
+    :func:`_with_one_more`, where that keeps the front on ``problem``'s mesh
+    monotone) is solved on ``fine`` as well and replaces the front's layout when it
+    does better there."""
     fine_state = pose_only_state(fine)
     search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
     search.out = Consolidation(next(iter(front.layouts.values())), 0, 0.0)
+    size = problem.size
     out: dict[int, RealizableResult | None] = {}
 
     def solve(lay: Layout, start=None) -> RealizableResult | None:
@@ -422,11 +446,20 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
             return None
 
     for k in sorted(front.layouts):
-        res = solve(front.layouts[k])
+        held = front.layouts[k]
+        others = [m for m in front.finished.get(k, []) if _key(m, size) != _key(held, size)]
+        if others:
+            search.log(f"front: the {1 + len(others)} finished {k}-tendon layouts on the finer mesh")
+        res = solve(held)
+        best = np.inf if res is None else search.cost(held.routes, res.pose_error_rel)
+        for lay in others:
+            there = solve(lay)
+            if there is not None and search.cost(lay.routes, there.pose_error_rel) < best - PRECISION ** 2:
+                front.layouts[k], res, best = lay, there, search.cost(lay.routes, there.pose_error_rel)
         below = out.get(k - 1)
         if below is not None and (res is None or res.pose_error_rel > below.pose_error_rel + PRECISION):
             smaller = front.layouts[k - 1]
-            for lay in [m for m in _with_one_more(search, smaller, front.routes, problem.size)
+            for lay in [m for m in _with_one_more(search, smaller, front.routes, size)
                         if m.error <= max(smaller.error, front.layouts[k].error) + PRECISION]:
                 start = np.concatenate([np.atleast_2d(below.ratios).reshape(fine.n_poses, -1),
                                         np.atleast_2d(lay.realizable.ratios).reshape(fine.n_poses, -1)[:, -1:]],
