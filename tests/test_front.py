@@ -271,3 +271,34 @@ def test_the_finer_mesh_chooses_among_each_counts_finished_layouts(searched):
     stuck = front_with([poor])
     res = converge_front(stuck, p, st, fine, p.scene.optimize, OPTIONS, "direct")
     assert stuck.layouts[2] is poor and res[2].pose_error_rel > 0.005
+
+
+def test_a_route_cut_short_is_carried_on_along_its_tangent(searched):
+    """A layout of the stem route and an arm route that stops halfway along the
+    planted arm tendon: carried on straight along its tangent at the cut end, the
+    arm route runs on along the planted line and the pose error falls; the
+    front's extension keeps that layout (refine 0: no route optimization, the
+    extension alone does it)."""
+    from test_consolidation import LINES
+
+    from tendon_taichi.extract.consolidation import _Search, route_settings
+    from tendon_taichi.extract.front import EXTEND, Front, _extend, _extensions
+    from tendon_taichi.extract.routes import extend_route, fit_route
+
+    p, st, _, _ = searched
+    search = _Search(p, st, p.scene.optimize, "direct", OPTIONS, route_settings(p, OPTIONS), "test", None)
+    arm = fit_route(np.array(LINES[0][:5]), p.size, 0.4, 0.0, "arm")  # x from 0.045 to 0.025, at y = 0.075
+    stem = fit_route(np.array(LINES[1]), p.size, 0.4, 0.0, "stem")
+    longer = extend_route(arm, 1, EXTEND * p.size, p.size)
+    assert longer.length == pytest.approx(arm.length + EXTEND * p.size, rel=1e-3)
+    np.testing.assert_allclose(longer.waypoints[:, 1], 0.075, atol=1e-6)  # on along the line ...
+    assert longer.waypoints[-1, 0] == pytest.approx(0.025 - EXTEND * p.size, abs=1e-6)  # ... past the cut
+    np.testing.assert_allclose(extend_route(arm, 0, 0.01, p.size).waypoints[0], [0.055, 0.075], atol=1e-6)
+    short = search.solve([arm, stem], search.start_ratios([arm, stem], np.array([[0.4, 0.4]])))
+    found = _extensions(search, short, p.size, OPTIONS.refine)
+    best = min(found, key=lambda lay: lay.cost)
+    assert best.routes[0].waypoints[:, 0].min() < 0.025 - 0.5 * EXTEND * p.size  # the cut end carried on
+    assert best.error < 0.5 * short.error and best.cost < short.cost
+    front = Front(layouts={2: short}, routes=[arm, stem])
+    _extend(search, front, front.routes, p.size, OPTIONS, lambda text: None)
+    assert front.layouts[2].cost == best.cost and front.finished[2]

@@ -11,7 +11,8 @@ size L only, never on the mesh: a route means the same at every resolution.
 :func:`fit_route` turns an extracted chain of lattice fibers into a route (a
 least-squares fit with the ends held, smoothed so that a 45-degree zig-zag
 becomes the line it approximates); :func:`keep_clear` moves a route's control
-points until every waypoint keeps the clearance from the walls.
+points until every waypoint keeps the clearance from the walls;
+:func:`join_routes` and :func:`extend_route` make new routes from old.
 """
 
 from __future__ import annotations
@@ -206,6 +207,18 @@ def keep_clear(route: Route, walls: Walls, clearance: float, iterations: int = 4
         target = pts + np.where(short[:, None], g * (clearance * 1.1 - d)[:, None], 0.0)
         control = smooth_fit(B, target, PUSH_SMOOTHING, weights=np.where(short, PUSH_WEIGHT, 1.0))
     return None
+
+
+def extend_route(route: Route, end: int, distance: float, size: float) -> Route:
+    """The route carried on straight along its tangent at its anchor (``end`` 0) or
+    pull end (``end`` 1) by ``distance`` (m): a smooth fit of its waypoints and the
+    straight piece (control points for the new length), its tension and source kept."""
+    pts = route.waypoints if end == 1 else route.waypoints[::-1]
+    tangent = pts[-1] - pts[-2]
+    tangent = tangent / max(float(np.linalg.norm(tangent)), 1e-300)
+    step = np.linspace(0.0, distance, max(2, int(np.ceil(distance * SAMPLES_PER_L / size)) + 1))[1:]
+    pts = np.vstack([pts, pts[-1] + step[:, None] * tangent])
+    return fit_route(pts if end == 1 else pts[::-1], size, route.tension, route.tension_std, route.source)
 
 
 def join_routes(a: Route, b: Route, size: float) -> Route:
