@@ -105,8 +105,8 @@ EXTEND = 0.1
 @dataclass
 class Front:
     """The best layout found per tendon count (``layouts``, finished; counts from 1),
-    every layout finished per count (``finished``, the best among them), and what
-    the search cost: ``seeds`` layouts it started from, ``pool`` distinct
+    every layout finished per count (``finished``, which :func:`converge_front`
+    chooses among), and what the search cost: ``seeds`` layouts it started from, ``pool`` distinct
     routes (``routes``), ``evaluations`` layouts solved in full, ``screened``
     candidates screened, ``route_evaluations`` equilibria of route optimization in
     ``route_s`` seconds, ``time_s`` in all."""
