@@ -41,7 +41,7 @@ tendons together:
   it when that costs less. An extractor's strand ends where the optimized fibers
   thin out, often short of where the tendon does most, and route optimization
   moves an end only downhill: carried on, a route can reach a better optimum it
-  cannot walk to (snake_planted_1t_s1 at level 3: one tendon 0.22 -> 0.08 % of L);
+  cannot walk to (snake_planted_1t_s1 at level 3: one tendon 0.22 -> 0.07 % of L);
 * **descent** (:func:`_descend`): from the most tendons down, each count's
   finished layout is reduced by every drop and smooth join (screened, the best
   solved in full); where the least costly reduction, as it is, already costs
