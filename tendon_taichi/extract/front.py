@@ -508,15 +508,17 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
 
     for k in sorted(front.layouts):
         held = front.layouts[k]
-        others = [m for m in front.finished.get(k, []) if _key(m, size) != _key(held, size)]
+        key = _key(held, size)
+        others = [m for m in front.finished.get(k, []) if _key(m, size) != key]
         if others:
             search.log(f"front: the {1 + len(others)} finished {k}-tendon layouts on the finer mesh")
         res = solve(held)
         best = np.inf if res is None else search.cost(held.routes, res.pose_error_rel)
         for lay in others:
             there = solve(lay)
-            if there is not None and search.cost(lay.routes, there.pose_error_rel) < best - PRECISION ** 2:
-                front.layouts[k], res, best = lay, there, search.cost(lay.routes, there.pose_error_rel)
+            cost = np.inf if there is None else search.cost(lay.routes, there.pose_error_rel)
+            if cost < best - PRECISION ** 2:
+                front.layouts[k], res, best = lay, there, cost
         below = out.get(k - 1)
         if below is not None and (res is None or res.pose_error_rel > below.pose_error_rel + PRECISION):
             smaller = front.layouts[k - 1]
