@@ -3,7 +3,9 @@ launch of a kind of arguments through Taichi, launches set the arguments
 directly and reuse the compiled kernel. The same kernels give the same numbers
 either way - Taichi arrays, numpy arrays, integers, floats, templates, scalar
 and vector returns -, a kind not seen yet goes through Taichi again, and
-Taichi's own errors are kept."""
+Taichi's own errors are kept. On the CPU a model's buffers are read and
+written through numpy views of their memory, with no launch at all: the same
+numbers as the copy kernels that other backends use."""
 
 import numpy as np
 import pytest
@@ -68,3 +70,31 @@ def test_a_kind_not_seen_goes_through_taichi(fb):
     a = np.zeros(16)
     fast_scaled(fb, 1, 1.0, a, True)
     assert np.array_equal(a, np.sin(np.arange(1.0, 17.0)))
+
+
+def test_host_views_move_the_numbers_the_copy_kernels_do():
+    from tendon_taichi import Model, build_problem, load_scene
+
+    p = build_problem(load_scene("t_shape"), 1)
+    views, kernels = (Model.from_problem(p) for _ in range(2))
+    assert views._fb_host is not None and views._ib_host is not None  # the CPU backend
+    kernels._fb_host = kernels._ib_host = None  # what a GPU backend does
+    rng = np.random.default_rng(3)
+    x = p.mesh.nodes + 1e-3 * p.size * rng.standard_normal(p.mesh.nodes.shape)
+    ac = 0.05 * p.fiber_cables.a0 * rng.random(views.C)
+    for m in (views, kernels):
+        m.set_positions(x)
+        m.write_many([("RHO", np.linspace(0.5, 1.0, m.C)), ("SEG_WT", np.linspace(1.0, 0.9, m.S))])
+        m.write_int("PT_TRI", m.cables.points.tri[::-1].copy())
+        m.write_int("PT_TRI", m.cables.points.tri)
+        m.set_contraction(ac)
+    assert np.array_equal(views.positions(), kernels.positions())
+    assert views.read_int("PT_TRI", 5) == kernels.read_int("PT_TRI", 5) == p.fiber_cables.points.tri[5]
+    for a, b in zip(views.read_many([("RHO", views.C), ("SEG_WT", views.S), ("X", 8)]),
+                    kernels.read_many([("RHO", views.C), ("SEG_WT", views.S), ("X", 8)])):
+        assert np.array_equal(a, b)
+    assert views.energy_and_min_det() == kernels.energy_and_min_det()
+    assert views.gradient_norm2() == kernels.gradient_norm2()
+    assert np.array_equal(views.last_gradient, kernels.last_gradient)
+    views.read("X", 4)[:] = 0.0  # a read is a copy, never the buffer itself
+    assert np.array_equal(views.positions(), kernels.positions())

@@ -107,6 +107,9 @@ class Model:
         #: the last gradient dE/dx as the host sees it, (2n,) N
         self.last_gradient = np.zeros(2 * self.n)
         self.ib.from_numpy(host.ib.astype(np.int32))
+        #: the buffers' memory as numpy arrays where it is the host's (CPU backend;
+        #: else None: the copy kernels move the arrays)
+        self._fb_host, self._ib_host = runtime.host_view(self.fb), runtime.host_view(self.ib)
 
     def _incidences(self, cab: CableSet) -> tuple[np.ndarray, np.ndarray]:
         """The node <- segment incidences (end b with +bary, end a with -bary) in CSR
@@ -153,25 +156,36 @@ class Model:
     # ------------------------------------------------------------ host access to the buffers
     def read(self, name: str, count: int, at: int = 0) -> np.ndarray:
         """``count`` entries of f64 array ``name`` from entry ``at``, (count,)."""
+        start = self.offset[name] + at
+        if self._fb_host is not None:
+            return self._fb_host[start:start + count].copy()
         out = np.empty(count, dtype=np.float64)
         if count:
-            k_read(self.fb, self.offset[name] + at, out)
+            k_read(self.fb, start, out)
         return out
 
     def write(self, name: str, values: np.ndarray, at: int = 0) -> None:
         """Write ``values`` into f64 array ``name`` from entry ``at``."""
         v = np.ascontiguousarray(values, dtype=np.float64).ravel()
-        if len(v):
-            k_write(self.fb, self.offset[name] + at, v)
+        start = self.offset[name] + at
+        if self._fb_host is not None:
+            self._fb_host[start:start + len(v)] = v
+        elif len(v):
+            k_write(self.fb, start, v)
 
     def write_int(self, name: str, values: np.ndarray, at: int = 0) -> None:
         """Write ``values`` into i32 array ``name`` from entry ``at``."""
         v = np.ascontiguousarray(values, dtype=np.int32).ravel()
-        if len(v):
-            k_write_int(self.ib, self.offset[name] + at, v)
+        start = self.offset[name] + at
+        if self._ib_host is not None:
+            self._ib_host[start:start + len(v)] = v
+        elif len(v):
+            k_write_int(self.ib, start, v)
 
     def read_many(self, items: list[tuple[str, int]]) -> list[np.ndarray]:
-        """Several arrays (name, count) in one kernel launch."""
+        """Several arrays (name, count) in one copy (one kernel launch off the CPU)."""
+        if self._fb_host is not None:
+            return [self._fb_host[self.offset[n]:self.offset[n] + c].copy() for n, c in items]
         counts = [c for _, c in items]
         dst = np.concatenate([[0], np.cumsum(counts)])
         ranges = np.array([[self.offset[n], c, d] for (n, c), d in zip(items, dst[:-1])], dtype=np.int32)
@@ -181,8 +195,12 @@ class Model:
         return [out[a:b] for a, b in zip(dst[:-1], dst[1:])]
 
     def write_many(self, items: list[tuple[str, np.ndarray]]) -> None:
-        """Several arrays (name, values) written in one kernel launch."""
+        """Several arrays (name, values) written at once (one kernel launch off the CPU)."""
         values = [np.ascontiguousarray(v, dtype=np.float64).ravel() for _, v in items]
+        if self._fb_host is not None:
+            for (n, _), v in zip(items, values):
+                self._fb_host[self.offset[n]:self.offset[n] + len(v)] = v
+            return
         counts = [len(v) for v in values]
         at = np.concatenate([[0], np.cumsum(counts)])
         ranges = np.array([[self.offset[n], c, a] for (n, _), c, a in zip(items, counts, at[:-1])], dtype=np.int32)
@@ -191,6 +209,8 @@ class Model:
 
     def read_int(self, name: str, at: int = 0) -> int:
         """Entry ``at`` of the i32 array ``name``."""
+        if self._ib_host is not None:
+            return int(self._ib_host[self.offset[name] + at])
         return int(k_read_int(self.ib, self.offset[name] + at))
 
     def node_vectors(self, name: str) -> np.ndarray:

@@ -157,6 +157,28 @@ def is_cpu() -> bool:
     return ensure_init() == "cpu"
 
 
+def host_view(arr) -> "np.ndarray | None":
+    """A numpy array that *is* the memory of the 1-D Taichi ndarray ``arr`` (no
+    copy), where that memory is the host's (the CPU backend), else None. Reads
+    and writes through it cost no kernel launch; CPU launches are synchronous,
+    so it always shows what the last kernel wrote. Valid while ``arr`` lives."""
+    import ctypes
+
+    import numpy as np
+
+    if not is_cpu():
+        return None
+    import taichi as ti
+
+    dtype = {ti.f64: np.float64, ti.i32: np.int32}[arr.dtype]
+    n = int(arr.shape[0])
+    address = ti.lang.impl.get_runtime().prog.get_ndarray_data_ptr_as_int(arr.arr)
+    if n == 0 or not address:
+        return np.zeros(0, dtype=dtype)
+    raw = (ctypes.c_byte * (n * np.dtype(dtype).itemsize)).from_address(address)
+    return np.frombuffer(raw, dtype=dtype)
+
+
 def parallel_threshold() -> int:
     if _settings["parallel_threshold"] is not None:
         return _settings["parallel_threshold"]
@@ -178,4 +200,4 @@ def info() -> dict:
     }
 
 
-__all__ = ["ti", "configure", "init", "ensure_init", "is_cpu", "parallel_threshold", "info"]
+__all__ = ["ti", "configure", "init", "ensure_init", "is_cpu", "host_view", "parallel_threshold", "info"]
