@@ -201,6 +201,7 @@ def test_the_table_marks_the_recommended_design_once():
     (["--budget", "nan"], "--budget must be a fraction of L in (0, 1)"),
     (["--budget", "1.5"], "--budget must be a fraction of L in (0, 1)"),
     (["--beam", "0"], "--beam must be an integer >= 1"),
+    (["--workers", "-1"], "--workers must be >= 0"),
 ])
 def test_bad_values_give_one_line_and_write_nothing(cli, tmp_path, args, message):
     r = cli("design", "t_shape", "--out", "out", *args, cwd=tmp_path)

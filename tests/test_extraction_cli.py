@@ -271,3 +271,26 @@ def test_extract_bad_input(run_rrd, cli, tmp_path):
     empty.write_header()
     empty.close()
     _one_line(cli("compare", tmp_path / "empty.rrd"), "no completed stage")
+
+
+def test_a_worker_process_consolidates_to_the_same_results(run_rrd):
+    """With a worker process consolidating the extractors' tendons beside this one,
+    every extractor's tendons, consolidation and figures are the same."""
+    from tendon_taichi.apps.extract import extract
+    from tendon_taichi.extract.settings import ConsolidationSettings
+    from tendon_taichi.tasks.pool import Pool
+
+    names = ["strands", "path_cover", "network_discovery"]
+    cons = ConsolidationSettings(refine=0)
+    alone = extract(run_rrd, names, record=False, consolidation=cons)
+    with Pool(1) as pool:
+        shared = extract(run_rrd, names, record=False, consolidation=cons, workers=pool)
+        assert pool.broken is None
+    assert [r.name for r in shared.results] == names
+    for a, b in zip(alone.results, shared.results):
+        assert a.error is None and b.error is None
+        assert [t.waypoints.tolist() for t in a.tendons] == [t.waypoints.tolist() for t in b.tendons]
+        assert a.metrics == b.metrics
+        ja, jb = a.consolidation.as_json(), b.consolidation.as_json()
+        assert {**ja, "route_s": 0} == {**jb, "route_s": 0}
+        assert a.consolidation.layout.source == b.consolidation.layout.source

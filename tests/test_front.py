@@ -302,3 +302,38 @@ def test_a_route_cut_short_is_carried_on_along_its_tangent(searched):
     front = Front(layouts={2: short}, routes=[arm, stem])
     _extend(search, front, front.routes, p.size, OPTIONS, lambda text: None)
     assert front.layouts[2].cost == best.cost and front.finished[2]
+
+
+def test_worker_processes_find_the_same_front(searched):
+    """With a worker process sharing the finishes, the extensions and the finer
+    mesh's solves (route optimization on: one round), the front, every finished
+    layout and the errors on the finer mesh are those found in one process, to
+    the last bit."""
+    import copy
+    from dataclasses import replace
+
+    from tendon_taichi import build_problem
+    from tendon_taichi.tasks.pool import Pool
+
+    p, st, greedy, _ = searched
+    options = replace(OPTIONS, refine=1)
+    fine = replace(build_problem(p.scene, 2), target_goal=p.target_goal)
+
+    def run(workers):
+        front = search_front(p, st, p.scene.optimize, greedy, options, "direct", workers=workers)
+        res = converge_front(copy.deepcopy(front), p, st, fine, p.scene.optimize, options, "direct", workers=workers)
+        return front, res
+
+    alone, alone_fine = run(None)
+    with Pool(1) as pool:
+        shared, shared_fine = run(pool)
+        assert pool.broken is None
+    assert alone.route_evaluations > 0 and shared.route_evaluations == alone.route_evaluations
+    assert sorted(shared.layouts) == sorted(alone.layouts)
+    for k in alone.layouts:
+        a, b = alone.layouts[k], shared.layouts[k]
+        assert a.error == b.error and a.cost == b.cost
+        assert all(np.array_equal(r.control, q.control) for r, q in zip(a.routes, b.routes))
+        assert np.array_equal(a.realizable.ratios, b.realizable.ratios)
+        assert [lay.cost for lay in alone.finished[k]] == [lay.cost for lay in shared.finished[k]]
+        assert alone_fine[k].pose_error_rel == shared_fine[k].pose_error_rel

@@ -6,19 +6,19 @@ warm-up all run cases through :func:`run_case`; each turns the
 :class:`~tendon_taichi.apps.design.Design` into its own figures.
 
 :func:`start_worker` is the set-up every worker process of the task engine
-runs once (start Taichi, compile the kernels by a short case)."""
+runs once (start Taichi, compile the kernels by a short case,
+:func:`~tendon_taichi.apps.design.warm_up`)."""
 
 from __future__ import annotations
 
-import tempfile
 import time
 from functools import partial
 from pathlib import Path
 
-from ..body.scene import Scene, load_scene, with_overrides
+from ..body.scene import Scene
 from ..extract.settings import BEAM, BUDGET, ConsolidationSettings
 from ..physics import runtime
-from .design import Design, design
+from .design import Design, design, warm_up
 from .optimize import Interrupted
 
 #: what stops a whole run of cases when a case raises it (Ctrl-C inside an in-process case)
@@ -36,19 +36,6 @@ def run_case(scene: Scene, level: int, out: str | Path, solver: str = "auto",
     return design(scene, level, out, solver, budget, extractors=extractors,
                   consolidation=consolidation or ConsolidationSettings(budget=budget), png=png, beam=beam,
                   converge=converge)
-
-
-def warm_up() -> float:
-    """Compile the kernels a case uses, by a short case on the built-in ``t_shape``
-    at level 1 in a temporary folder; returns seconds. Its extraction skips
-    consolidation: the realizable robots it solves use the same kernels, and after
-    three iterations per stage the pattern is still dense, which would make
-    consolidating it take about a minute."""
-    t0 = time.perf_counter()
-    scene = with_overrides(load_scene("t_shape"), {"stage_iterations": 3, "k_min": 0.5})
-    with tempfile.TemporaryDirectory(prefix="tendon-taichi-warmup-") as tmp:
-        run_case(scene, 1, tmp, consolidation=ConsolidationSettings(tolerance=-1.0, refine=0), converge=False)
-    return time.perf_counter() - t0
 
 
 def start_worker(threads: int | None, arch: str | None = None, warm: bool = True) -> dict:

@@ -15,6 +15,8 @@ against tendon count)."""
 from __future__ import annotations
 
 import json
+import os
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +37,8 @@ from ..io.export import write_as_built
 from ..io.plots import plot_design, plot_front
 from ..io.progress import Progress
 from ..io.recording import rewrite
+from ..physics import runtime
+from ..tasks.pool import Pool
 from ..version import provenance
 from .extract import Extraction, extract, frictionless_error, log_layout
 from .optimize import RunResult, optimize
@@ -105,26 +109,64 @@ def tendon_rows(layout: Layout, mu: float) -> list[dict]:
     return rows
 
 
+def default_workers() -> int:
+    """Worker processes ``design`` starts by default: one per core it may use
+    but the one it runs on."""
+    return max(0, len(os.sched_getaffinity(0)) - 1) if hasattr(os, "sched_getaffinity") else \
+        max(0, (os.cpu_count() or 1) - 1)
+
+
+def start_worker(arch: str, threads: int | None) -> None:
+    """A design worker process's set-up: Taichi on ``arch`` with ``threads``, its
+    kernels compiled by a short design (:func:`warm_up`)."""
+    runtime.configure(arch=arch, threads=threads)
+    runtime.init()
+    warm_up()
+
+
+def warm_up() -> float:
+    """Compile the kernels a design uses, by a short one of the built-in ``t_shape``
+    at level 1 in a temporary folder; returns seconds. Its extraction skips
+    consolidation: the realizable robots it solves use the same kernels, and after
+    three iterations per stage the pattern is still dense, which would make
+    consolidating it take about a minute."""
+    from ..body.scene import load_scene, with_overrides
+
+    t0 = time.perf_counter()
+    scene = with_overrides(load_scene("t_shape"), {"stage_iterations": 3, "k_min": 0.5})
+    with tempfile.TemporaryDirectory(prefix="tendon-taichi-warmup-") as tmp:
+        design(scene, 1, tmp, consolidation=ConsolidationSettings(tolerance=-1.0, refine=0), png=False,
+               converge=False)
+    return time.perf_counter() - t0
+
+
 def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: str = "auto",
            budget: float = BUDGET, max_tendons: int | None = None, extractors: list[str] | None = None,
            consolidation: ConsolidationSettings | None = None, progress: Progress | None = None,
            plugin_timeout: float | None = None, png: bool = True, beam: int = BEAM,
-           converge: bool = True) -> Design:
+           converge: bool = True, workers: int = 0) -> Design:
     """The main job (module docstring) on ``scene`` at ``level`` into the folder
     ``out`` (default :func:`default_out`); ``budget`` (fraction of L) both bounds
     consolidation (unless ``consolidation`` says otherwise) and picks the
     recommendation; ``png`` draws design.png and front.png; ``beam`` and ``converge``
-    as for :func:`recommended`."""
+    as for :func:`recommended`; ``workers`` processes (started at once, warming up
+    while the contractions are optimized) share the front's route optimizations -
+    the same design, sooner where there are idle cores."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     out = Path(out) if out is not None else default_out(scene, level)
     for name in FILES:
         check_writable(out / name, "output")
-    progress.message(f"design: optimizing {scene.name} at level {level}")
-    run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
-    ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
-                                      plugin_timeout, beam, converge)
+    with Pool(workers, start_worker, (runtime.info()["arch"], runtime.info()["threads"])) as pool:
+        progress.message(f"design: optimizing {scene.name} at level {level}"
+                         + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
+        run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
+        ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
+                                          plugin_timeout, beam, converge, pool)
+    if pool.broken:
+        progress.message(f"design: {pool.broken}")
     summary["timing"]["optimize_s"] = run.summary["time_s"]
+    summary["timing"]["workers"] = workers
     summary["files"] = _write(out, ex, layout, summary, png)
     summary["time_s"] = time.perf_counter() - t0
     write_json(summary, out / "design.json")
@@ -134,12 +176,13 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
 def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int | None = None,
                 extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
                 progress: Progress | None = None, plugin_timeout: float | None = None, beam: int = BEAM,
-                converge: bool = True) -> tuple[Extraction, Layout, dict]:
+                converge: bool = True, workers: Pool | None = None) -> tuple[Extraction, Layout, dict]:
     """Every extractor on a recorded run's last stage, consolidated and routed, the
     count/error front searched from all their routes (:func:`search_front`), each
     front entry solved again on the next finer mesh (``converge``), and the layout
     recommended (:func:`recommend`): the extraction, the layout and the summary
-    ``design.json`` holds (no file is written)."""
+    ``design.json`` holds (no file is written). ``workers`` (a pool of worker
+    processes) share the front's independent pieces."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     cons = consolidation or ConsolidationSettings(budget=budget)
@@ -148,18 +191,19 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
     def log(text: str) -> None:
         progress.message(f"design: {text}")
 
-    ex = extract(recording, extractors, solver="recorded", record=False, consolidation=cons, log=log, **kwargs)
+    ex = extract(recording, extractors, solver="recorded", record=False, consolidation=cons, log=log,
+                 workers=workers, **kwargs)
     extract_s = time.perf_counter() - t0
     problem, solver = ex.problem, ex.run.meta.get("solver", "auto")
     done = [r.consolidation for r in ex.results if r.error is None and r.consolidation is not None]
     if not done:
         raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
     ms = MetricSettings(mu=problem.scene.tendons.friction)
-    front = search_front(problem, ex.state, ex.run.settings, done, cons, solver, max_tendons, beam, log)
+    front = search_front(problem, ex.state, ex.run.settings, done, cons, solver, max_tendons, beam, log, workers)
     if not front.layouts:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)" if max_tendons
                          else "no extractor's tendons make a layout of one tendon or more")
-    fine = finer_mesh_errors(ex, front, cons, solver, log) if converge else None
+    fine = finer_mesh_errors(ex, front, cons, solver, log, workers) if converge else None
     rows = front_rows(front, fine, ms.mu, ms.kink_angle)
     chosen = recommend(rows, budget, max_tendons)
     layout = front.layouts[chosen["count"]]
@@ -173,7 +217,8 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
     return ex, layout, summary
 
 
-def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings, solver: str, log) -> dict:
+def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings, solver: str, log,
+                      workers: Pool | None = None) -> dict:
     """The front's layouts solved on the next finer mesh (level + 1), kept monotone
     there (:func:`converge_front`): ``resolution``, ``results`` (per count its
     as-built robot there, None where it could not be solved), ``time_s``, and
@@ -188,7 +233,7 @@ def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings,
     except TendonError as exc:
         log(f"the level-{level} mesh was not built ({exc}); the front's errors are at level {level - 1}")
         return {**out, "error": str(exc), "time_s": time.perf_counter() - t0}
-    out["results"] = converge_front(front, ex.problem, ex.state, fine, ex.run.settings, cons, solver, log)
+    out["results"] = converge_front(front, ex.problem, ex.state, fine, ex.run.settings, cons, solver, log, workers)
     out["time_s"] = time.perf_counter() - t0
     return out
 

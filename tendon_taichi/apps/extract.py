@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ from ..io.recording import (TENDONS_OF, RecordedRun, RecordingError, chunk_at_st
                             rewrite, tendons_owner)
 from ..optimizer.soft_ik import state_solver
 from ..physics.model import Model
+from ..tasks.pool import Pool
 
 
 @dataclass
@@ -123,32 +125,70 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
     the same tendons are not consolidated twice."""
     t0 = time.perf_counter()
     say = log or (lambda text: None)
+    found = _plugin_tendons(name, problem, state, options, timeout, say)
+    if isinstance(found, ExtractorResult):
+        return replace(found, time_s=time.perf_counter() - t0)
+    key = _key(found)
+    if done is not None and key in done:
+        cons = done[key].relabel(name)
+        say(f"{name}: the same tendons as {done[key].layout.source}")
+    else:
+        cons = _consolidated(problem, found, state, run.settings, consolidation, solver, name, log)
+    if done is not None and not isinstance(cons, str):
+        done.setdefault(key, cons)
+    return _scored(name, problem, state, cons, run, solver, metric_settings, t0, say)
+
+
+def _key(tendons: list[Tendon]) -> tuple:
+    """Which tendons an extractor found (their waypoints): equal keys, equal tendons."""
+    return tuple(t.waypoints.tobytes() for t in tendons)
+
+
+def _plugin_tendons(name: str, problem: Problem, state: IdealizedState, options: dict | None, timeout: float,
+                    say) -> list[Tendon] | ExtractorResult:
+    """Extractor ``name``'s checked tendons, or its result with the ``error`` that
+    stopped it."""
     try:
         ext = load_extractor(name)
         opts = ext.make_options(options) if hasattr(ext, "make_options") else options
         say(f"{name}: extracting")
         view, seen = read_only_copy(problem), read_only_copy(state)
         found = call_plugin(name, lambda: ext.extract(view, seen, opts), timeout)
-        tendons = check_tendons(name, found, problem)
+        return check_tendons(name, found, problem)
     except PluginError as exc:
-        return ExtractorResult(name, time_s=time.perf_counter() - t0, error=str(exc))
+        return ExtractorResult(name, error=str(exc))
     except Exception as exc:  # noqa: BLE001 - a plugin's bug must not stop the others
         msg = str(exc).splitlines()[0] if str(exc) else ""
-        return ExtractorResult(name, time_s=time.perf_counter() - t0,
-                               error=f"extractor '{name}' raised {type(exc).__name__}: {msg}")
-    key = tuple(t.waypoints.tobytes() for t in tendons)
+        return ExtractorResult(name, error=f"extractor '{name}' raised {type(exc).__name__}: {msg}")
+
+
+def _consolidated(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings,
+                  consolidation: ConsolidationSettings | None, solver: str, name: str,
+                  log=None) -> Consolidation | str:
+    """The tendons consolidated (:func:`consolidate`), or why their robot cannot be
+    solved (the equilibrium's error)."""
     try:
-        if done is not None and key in done:
-            cons = done[key].relabel(name)
-            say(f"{name}: the same tendons as {done[key].layout.source}")
-        else:
-            cons = consolidate(problem, tendons, state, run.settings, consolidation or ConsolidationSettings(),
-                               solver, source=name, log=log)
+        return consolidate(problem, tendons, state, settings, consolidation or ConsolidationSettings(), solver,
+                           source=name, log=log)
     except ConvergenceError as exc:
+        return str(exc)
+
+
+def _consolidate_task(spec: tuple, job: tuple[str, list[Tendon]]) -> tuple[Consolidation | str, float]:
+    """:func:`_consolidated` as a worker process runs it (``spec``: the problem,
+    state, optimize settings, consolidation settings and solver; ``job``: the
+    extractor's name and tendons), with the seconds it took."""
+    t0 = time.perf_counter()
+    problem, state, settings, consolidation, solver = spec
+    return _consolidated(problem, job[1], state, settings, consolidation, solver, job[0]), time.perf_counter() - t0
+
+
+def _scored(name: str, problem: Problem, state: IdealizedState, cons: Consolidation | str, run: RecordedRun,
+            solver: str, metric_settings: MetricSettings, t0: float, say) -> ExtractorResult:
+    """Extractor ``name``'s result from its consolidation (or why its robot could not be solved)."""
+    if isinstance(cons, str):
         return ExtractorResult(name, time_s=time.perf_counter() - t0,
-                               error=f"extractor '{name}': its tendons' robot cannot be solved ({exc})")
-    if done is not None:
-        done.setdefault(key, cons)
+                               error=f"extractor '{name}': its tendons' robot cannot be solved ({cons})")
     real = cons.realizable
     tendons = cons.tendons
     metrics = tendon_metrics(problem, state, tendons, metric_settings)
@@ -167,6 +207,41 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
     return ExtractorResult(name, tendons, metrics, real, dt, pose_names=problem.pose_names, consolidation=cons)
 
 
+def _run_shared(names: list[str], problem: Problem, state: IdealizedState, options: dict, run: RecordedRun,
+                solver: str, ms: MetricSettings, consolidation: ConsolidationSettings | None, timeout: float, log,
+                workers: Pool) -> list[ExtractorResult]:
+    """:func:`run_extractor` for every extractor, their distinct tendons consolidated
+    on ``workers`` and here at once: the plugins run here one after the other,
+    then every distinct set of tendons is consolidated (the same results)."""
+    say = log or (lambda text: None)
+    t0 = {}
+    found = {}
+    for n in names:
+        t0[n] = time.perf_counter()
+        found[n] = _plugin_tendons(n, problem, state, options.get(n), timeout, say)
+    first: dict[tuple, str] = {}
+    for n in names:
+        if not isinstance(found[n], ExtractorResult):
+            first.setdefault(_key(found[n]), n)
+    jobs = [(n, found[n]) for n in first.values()]
+    say(f"consolidating the tendons of {len(jobs)} extractor(s) in {min(len(jobs), workers.active + 1)} processes")
+    spec = (problem, state, run.settings, consolidation, solver)
+    made = dict(zip(first.values(), workers.map(partial(_consolidate_task, spec), jobs)))
+    results = []
+    for n in names:
+        if isinstance(found[n], ExtractorResult):
+            results.append(replace(found[n], time_s=time.perf_counter() - t0[n]))
+            continue
+        source = first[_key(found[n])]
+        cons, took = made[source]
+        if source != n and not isinstance(cons, str):
+            cons = cons.relabel(n)
+            say(f"{n}: the same tendons as {source}")
+        start = time.perf_counter() - (took if source == n else 0.0)
+        results.append(_scored(n, problem, state, cons, run, solver, ms, start, say))
+    return results
+
+
 def frictionless_error(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings, solver: str,
                        real: RealizableResult) -> float:
     """The realizable pose error (fraction of L) of ``tendons`` without friction, their
@@ -183,7 +258,7 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
             metric_settings: MetricSettings | None = None, record: bool | str | Path = False,
             consolidation: ConsolidationSettings | None = None, on_wait=None,
             plugin_timeout: float = PLUGIN_TIMEOUT, friction: float | None = None,
-            clearance: float | None = None, log=None) -> Extraction:
+            clearance: float | None = None, log=None, workers: Pool | None = None) -> Extraction:
     """Run extractors (default: every installed one, each for at most
     ``plugin_timeout`` s) on a recorded stage (default: the last completed), each
     followed by consolidation (default settings unless ``consolidation`` is
@@ -192,7 +267,8 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     tendons: True into the recording itself, a path into a file of their own that
     the viewer shows with the run (:func:`log_tendons`; ``on_wait`` is called if
     another process is writing; when that fails, the results are kept and
-    ``record_error`` says why)."""
+    ``record_error`` says why). ``workers`` (a pool of worker processes) share the
+    consolidations (the same results)."""
     run = read_recording(path)
     target = record_target(run, record)
     if not run.stages:
@@ -210,9 +286,13 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     problem = run.problem().with_tendons(friction=friction, clearance=clearance)
     state = idealized_state(run, problem, stage, solver)
     ms = metric_settings or MetricSettings(mu=problem.scene.tendons.friction)
-    done: dict = {}
-    results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout, log,
-                             done) for n in names]
+    if workers is not None and workers.active and len(names) > 1:
+        results = _run_shared(names, problem, state, options, run, solver, ms, consolidation, plugin_timeout, log,
+                              workers)
+    else:
+        done: dict = {}
+        results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout,
+                                 log, done) for n in names]
     out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
     if target is not None and any(r.error is None for r in results):
         try:

@@ -21,6 +21,8 @@ def _checked(args) -> tuple[float, int | None]:
         raise InputError(f"--budget must be a fraction of L in (0, 1) (got {args.budget:g})")
     if args.max_tendons is not None and args.max_tendons < 1:
         raise InputError(f"--max-tendons must be an integer >= 1 (got {args.max_tendons})")
+    if args.workers is not None and args.workers < 0:
+        raise InputError(f"--workers must be >= 0 (got {args.workers})")
     return args.budget, args.max_tendons
 
 
@@ -59,7 +61,7 @@ def table(summary: dict) -> list[str]:
 
 
 def cmd_design(args) -> int:
-    from ..apps.design import design
+    from ..apps.design import default_workers, design
     from ..body.scene import load_scene, with_overrides
     from ..io.progress import Progress
 
@@ -72,7 +74,8 @@ def cmd_design(args) -> int:
         raise InputError(f"--resolution must be >= 1 (got {args.resolution})")
     scene = with_overrides(load_scene(args.scene), optimize_overrides(args)).with_tendons(**tendons)
     result = design(scene, args.resolution, args.out, args.solver, budget, max_tendons, args.extractors, cons,
-                    Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png, **front)
+                    Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png,
+                    workers=default_workers() if args.workers is None else args.workers, **front)
     summary = result.summary
     json_out(args, summary)
     if args.json != "-":
@@ -101,6 +104,9 @@ def add_commands(sub) -> None:
     s.add_argument("--plugin-timeout", type=float, default=PLUGIN_TIMEOUT, metavar="S",
                    help=f"give up on an extractor that runs longer than S seconds (default {PLUGIN_TIMEOUT:g})")
     s.add_argument("--no-png", action="store_true", help="skip design.png and front.png")
+    s.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="worker processes that share the front's route optimizations (default: one per core "
+                        "but one; 0: none) - the same design either way")
     s.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_optimize_flags(s)
     add_json(s)

@@ -184,6 +184,10 @@ class Candidate(NamedTuple):
     start: np.ndarray
 
 
+#: what a search counts (:class:`Consolidation` fields)
+TALLY = ("evaluations", "unsolved", "screened", "route_evaluations", "route_s")
+
+
 class _Search:
     """Solves and ranks layouts on the as-built robot, counting them in ``out``."""
 
@@ -194,6 +198,28 @@ class _Search:
         self.options, self.rs, self.source = options, route_settings, source
         self.log = log or (lambda text: None)
         self.out: Consolidation | None = None
+
+    # ------------------------------------------------------------ the same search in a worker process
+    def spec(self) -> tuple:
+        """What a worker process needs to make this search again (:meth:`again`): its
+        arguments but the log (all of them picklable)."""
+        return self.problem, self.state, self.settings, self.solver, self.options, self.rs, self.source
+
+    @classmethod
+    def again(cls, spec: tuple, layout: Layout) -> "_Search":
+        """The search ``spec`` describes, silent, counting into a tally of its own."""
+        search = cls(*spec, None)
+        search.out = Consolidation(layout, 0, 0.0)
+        return search
+
+    def tally(self) -> dict:
+        """What this search counted (:data:`TALLY`)."""
+        return {k: getattr(self.out, k) for k in TALLY}
+
+    def add(self, tally: dict) -> None:
+        """Count what another search counted (:meth:`tally`)."""
+        for k, v in tally.items():
+            setattr(self.out, k, getattr(self.out, k) + v)
 
     # ------------------------------------------------------------ solving and ranking
     def cost(self, routes: list[Route], error: float) -> float:

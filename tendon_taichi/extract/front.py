@@ -55,6 +55,11 @@ tendons together:
 Every layout finished on the way is kept (``Front.finished``): on the design
 mesh several often tie, and :func:`converge_front` lets the finer mesh choose.
 
+The finishes of a count's layouts, the extensions and the solves on the finer
+mesh are independent of each other: a pool of worker processes
+(:class:`~tendon_taichi.tasks.pool.Pool`) shares them with this one, and the
+front is the same.
+
 Because a greedy layout of each count is among the seeds, the front is never
 worse than greedy consolidation at any count (in effective error).
 :func:`converge_front` then solves every finished layout of each count on a
@@ -68,6 +73,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import partial
 from itertools import combinations
 from typing import Callable
 
@@ -76,6 +82,7 @@ import numpy as np
 from ..body.problem import Problem
 from ..errors import ConvergenceError
 from ..objective.settings import OptimizeSettings
+from ..tasks.pool import Pool
 from .consolidation import Candidate, Consolidation, Layout, _Search, positions, route_settings
 from .protocol import IdealizedState
 from .realizable import RealizableResult, solve_realizable_poses
@@ -179,11 +186,12 @@ def _best(layouts: list[Layout], n: int, size: float) -> list[Layout]:
 def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSettings,
                  consolidations: list[Consolidation], options: ConsolidationSettings, solver: str = "auto",
                  max_tendons: int | None = None, beam: int = BEAM,
-                 log: Callable[[str], None] | None = None) -> Front:
+                 log: Callable[[str], None] | None = None, workers: Pool | None = None) -> Front:
     """The front (module docstring) from the extractors' ``consolidations``: per count
     1 .. the most any seed has (at most ``max_tendons``), the best layout found,
     finished. With consolidation off (``options.enabled`` false), the seeds as they
-    are, no search."""
+    are, no search. ``workers``, a pool of worker processes, share the independent
+    route optimizations (the same front as without them)."""
     t0 = time.perf_counter()
     say = log or (lambda text: None)
     wide = replace(options, gap=max(options.gap, JOIN_GAP))
@@ -231,7 +239,7 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
         members = _best(by_count[k], 1, size) if within else by_count[k]
         say(f"front: optimizing the routes of the {'best' if len(members) == 1 else len(members)} "
             f"{k}-tendon layout{'s' if len(members) > 1 else ''}")
-        done = [_finished(search, m, 1 if within else options.refine) for m in members]
+        done = _finish_all(search, workers, members, 1 if within else options.refine)
         lay = min(done, key=lambda m: m.cost)
         if k > 1 and k - 1 in front.layouts and lay.error > front.layouts[k - 1].error + PRECISION:
             lay = _one_more(search, front.layouts[k - 1], pool, lay, size)
@@ -245,7 +253,7 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
                     f"{smaller.count}-tendon layout of {100 * smaller.error:.2f}% of L")
                 front.layouts[smaller.count] = smaller
         within = any(m.error <= options.budget for m in front.layouts.values())
-    _extend(search, front, pool, size, options, say)
+    _extend(search, front, pool, size, options, say, workers)
     _descend(search, front, pool, size, say)
     front.evaluations, front.screened = tally.evaluations, tally.screened
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
@@ -326,6 +334,28 @@ def _finished(search: _Search, layout: Layout, rounds: int) -> Layout:
     if layout.optimized:
         return layout
     return replace(search.finish(layout, rounds)[0], source=sources(layout.routes))
+
+
+def _finish_task(spec: tuple, job: tuple[Layout, int]) -> tuple[Layout, dict]:
+    """:func:`_finished` (``job``: the layout and the rounds) as a worker process runs it."""
+    search = _Search.again(spec, job[0])
+    return _finished(search, *job), search.tally()
+
+
+def _shared(search: _Search, workers: Pool, task, jobs: list) -> list:
+    """``task(search's spec, job)`` for every job, shared between ``workers`` and this
+    process, each one's tally added to ``search``'s; the tasks' results in order."""
+    done = workers.map(partial(task, search.spec()), jobs)
+    for _, tally in done:
+        search.add(tally)
+    return [out for out, _ in done]
+
+
+def _finish_all(search: _Search, workers: Pool | None, layouts: list[Layout], rounds: int) -> list[Layout]:
+    """Each of ``layouts`` finished (:func:`_finished`), on ``workers`` too where there are."""
+    if workers is None or not workers.active:
+        return [_finished(search, m, rounds) for m in layouts]
+    return _shared(search, workers, _finish_task, [(m, rounds) for m in layouts])
 
 
 def _pooled(search: _Search, consolidations: list[Consolidation], size: float) -> Layout | None:
@@ -419,40 +449,56 @@ def _repair(search: _Search, front: Front, pool: list[Route], size: float, chang
             front.offer([front.layouts[k + 1]], size)
 
 
-def _extensions(search: _Search, layout: Layout, size: float, rounds: int) -> list[Layout]:
+def _extensions(search: _Search, layout: Layout, size: float, rounds: int,
+                workers: Pool | None = None) -> list[Layout]:
     """The solved ``layout`` with one route end carried on straight by ``EXTEND`` x L
     (:func:`~.routes.extend_route`; each end of each route, kept clear of the
     walls; an end the walls cut back to less than half that is left out), each
-    solved from ``layout``'s contractions and equilibria and finished (``rounds``)."""
-    start = np.atleast_2d(layout.realizable.ratios).reshape(search.problem.n_poses, -1)
-    out = []
+    solved from ``layout``'s contractions and equilibria and finished (``rounds``;
+    on ``workers`` too where there are)."""
+    jobs = []
     for i, route in enumerate(layout.routes):
         for end in (0, 1):
             longer = keep_clear(extend_route(route, end, EXTEND * size, size), search.problem.walls,
                                 search.rs.clearance)
             if longer is None or longer.length < route.length + 0.5 * EXTEND * size:
                 continue
-            routes = layout.routes[:i] + [longer] + layout.routes[i + 1:]
-            lay = search.solve(routes, start, layout)
-            if lay is not None:
-                out.append(_finished(search, replace(lay, source=sources(routes)), rounds))
-    return out
+            jobs.append((layout, layout.routes[:i] + [longer] + layout.routes[i + 1:], rounds))
+    if workers is None or not workers.active:
+        found = [_extended(search, *job) for job in jobs]
+    else:
+        found = _shared(search, workers, _extension_task, jobs)
+    return [lay for lay in found if lay is not None]
+
+
+def _extended(search: _Search, layout: Layout, routes: list[Route], rounds: int) -> Layout | None:
+    """``routes`` (``layout``'s with one extended) solved from ``layout``'s
+    contractions and equilibria and finished; None when they cannot be solved."""
+    start = np.atleast_2d(layout.realizable.ratios).reshape(search.problem.n_poses, -1)
+    lay = search.solve(routes, start, layout)
+    return None if lay is None else _finished(search, replace(lay, source=sources(routes)), rounds)
+
+
+def _extension_task(spec: tuple, job: tuple[Layout, list[Route], int]) -> tuple[Layout | None, dict]:
+    """:func:`_extended` as a worker runs it."""
+    search = _Search.again(spec, job[0])
+    return _extended(search, *job), search.tally()
 
 
 def _extend(search: _Search, front: Front, pool: list[Route], size: float, options: ConsolidationSettings,
-            say: Callable[[str], None]) -> None:
+            say: Callable[[str], None], workers: Pool | None = None) -> None:
     """The front's extension (module docstring), in place: up to one count above the
     first within the budget (where none is, the most tendons only), the best of
     each count's layout and its extensions (:func:`_extensions`, each offered to
     the finer mesh); then the monotone repair (:func:`_repair`) above each count
-    whose layout an extension replaced."""
+    whose layout an extension replaced. ``workers`` share the extensions."""
     within = [k for k, lay in front.layouts.items() if lay.error <= options.budget]
     counts = [k for k in sorted(front.layouts) if k <= min(within) + 1] if within else sorted(front.layouts)[-1:]
     changed = set()
     for k in counts:
         held = front.layouts[k]
         say(f"front: the {k}-tendon layout with each route end carried on by {EXTEND:g} L")
-        found = _extensions(search, held, size, options.refine)
+        found = _extensions(search, held, size, options.refine, workers)
         front.offer(found, size)
         best = min(found, key=lambda lay: lay.cost, default=None)
         if best is not None and best.cost < held.cost:
@@ -482,8 +528,8 @@ def converged_error(fine: Problem, layout: Layout, state: IdealizedState, settin
 
 
 def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: Problem, settings: OptimizeSettings,
-                   options: ConsolidationSettings, solver: str = "auto",
-                   log: Callable[[str], None] | None = None) -> dict[int, RealizableResult | None]:
+                   options: ConsolidationSettings, solver: str = "auto", log: Callable[[str], None] | None = None,
+                   workers: Pool | None = None) -> dict[int, RealizableResult | None]:
     """Each count's layouts on the finer mesh ``fine`` (:func:`converged_error`; None
     where none can be solved), in place: of the layout held and every other one
     finished for that count (``front.finished``), the least costly there (its pose
@@ -493,29 +539,29 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
     one more pooled route (the best on ``problem``'s mesh from each start,
     :func:`_with_one_more`, where that keeps the front on ``problem``'s mesh
     monotone) is solved on ``fine`` as well and replaces the front's layout when it
-    does better there."""
+    does better there. ``workers`` share the solves of the finished layouts."""
     fine_state = pose_only_state(fine)
     search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
     search.out = Consolidation(next(iter(front.layouts.values())), 0, 0.0)
     size = problem.size
     out: dict[int, RealizableResult | None] = {}
-
-    def solve(lay: Layout, start=None) -> RealizableResult | None:
-        try:
-            return converged_error(fine, lay, fine_state, settings, solver, start)
-        except ConvergenceError:
-            return None
-
+    spec = (fine, fine_state, settings, solver)
+    choices = {}
     for k in sorted(front.layouts):
-        held = front.layouts[k]
-        key = _key(held, size)
-        others = [m for m in front.finished.get(k, []) if _key(m, size) != key]
-        if others:
-            search.log(f"front: the {1 + len(others)} finished {k}-tendon layouts on the finer mesh")
-        res = solve(held)
+        key = _key(front.layouts[k], size)
+        choices[k] = [front.layouts[k]] + [m for m in front.finished.get(k, []) if _key(m, size) != key]
+    jobs = [(lay, None) for k in sorted(choices) for lay in choices[k]]
+    if len(jobs) > len(choices):
+        search.log(f"front: the {len(jobs)} finished layouts on the finer mesh")
+    task = partial(_fine_task, spec)
+    found = workers.map(task, jobs) if workers is not None else [task(job) for job in jobs]
+    solved = {id(lay): res for (lay, _), res in zip(jobs, found)}
+    for k in sorted(front.layouts):
+        held, others = choices[k][0], choices[k][1:]
+        res = solved[id(held)]
         best = np.inf if res is None else search.cost(held.routes, res.pose_error_rel)
         for lay in others:
-            there = solve(lay)
+            there = solved[id(lay)]
             cost = np.inf if there is None else search.cost(lay.routes, there.pose_error_rel)
             if cost < best - PRECISION ** 2:
                 front.layouts[k], res, best = lay, there, cost
@@ -527,10 +573,21 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
                 start = np.concatenate([np.atleast_2d(below.ratios).reshape(fine.n_poses, -1),
                                         np.atleast_2d(lay.realizable.ratios).reshape(fine.n_poses, -1)[:, -1:]],
                                        axis=1)
-                more = solve(lay, start)
+                more = task((lay, start))
                 if more is not None and (res is None or more.pose_error_rel < res.pose_error_rel):
                     front.layouts[k], res = lay, more
         out[k] = res
     front.evaluations += search.out.evaluations
     front.screened += search.out.screened
     return out
+
+
+def _fine_task(spec: tuple, job: tuple[Layout, np.ndarray | None]) -> RealizableResult | None:
+    """:func:`converged_error` (``spec``: the finer problem, its pose-only state, the
+    settings and the solver; ``job``: the layout and where to start), None where
+    it cannot be solved."""
+    fine, fine_state, settings, solver = spec
+    try:
+        return converged_error(fine, job[0], fine_state, settings, solver, job[1])
+    except ConvergenceError:
+        return None
