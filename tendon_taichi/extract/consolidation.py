@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -53,6 +54,7 @@ import numpy as np
 from ..body.problem import Problem
 from ..errors import ConvergenceError
 from ..objective.settings import OptimizeSettings
+from ..tasks.pool import Pool
 from .protocol import IdealizedState, Tendon, turn_angles
 from .realizable import RealizableResult, pose_tension, predict_realizable, solve_realizable_poses, warm_ratios
 from .routes import Route, fit_route, join_routes, keep_clear, sample_count
@@ -198,6 +200,8 @@ class _Search:
         self.options, self.rs, self.source = options, route_settings, source
         self.log = log or (lambda text: None)
         self.out: Consolidation | None = None
+        #: worker processes that share the full solves and the screen of :meth:`ranked` (None: none)
+        self.workers: Pool | None = None
 
     # ------------------------------------------------------------ the same search in a worker process
     def spec(self) -> tuple:
@@ -258,8 +262,23 @@ class _Search:
         that cannot be solved are left out."""
         if self.options.screen and len(candidates) > self.options.screen:
             candidates = self._screened(candidates, now)
-        solved = [(c, self.solve(c.routes, c.start, now)) for c in candidates]
-        return sorted([s for s in solved if s[1] is not None], key=lambda s: s[1].cost)
+        if self.sharing(candidates):
+            layouts = self.shared(_solve_task, [(c.routes, c.start, now) for c in candidates])
+        else:
+            layouts = [self.solve(c.routes, c.start, now) for c in candidates]
+        return sorted([s for s in zip(candidates, layouts) if s[1] is not None], key=lambda s: s[1].cost)
+
+    def sharing(self, jobs: list) -> bool:
+        """Whether these jobs go to the workers (there are some, and more than one job)."""
+        return self.workers is not None and self.workers.active > 0 and len(jobs) > 1
+
+    def shared(self, task, jobs: list) -> list:
+        """``task(spec, job)`` for every job, shared with the workers, each one's tally
+        added to this search's; the results in order."""
+        done = self.workers.map(partial(task, self.spec()), jobs)
+        for _, tally in done:
+            self.add(tally)
+        return [out for out, _ in done]
 
     def reduce(self, now: Layout, bound: float) -> tuple[Candidate, Layout] | None:
         """The next reduction: the least-cost drop or join whose effective error is
@@ -279,18 +298,23 @@ class _Search:
     def _screened(self, candidates: list[Candidate], now: Layout) -> list[Candidate]:
         """The ``screen`` candidates of least cost as one Gauss-Newton step predicts
         them from the current layout's solution, each with its predicted contractions."""
-        scored = []
-        for c in candidates:
-            self.out.screened += 1
-            try:
-                error, ratios = predict_realizable(self.problem, [r.tendon() for r in c.routes], self.settings,
-                                                   c.start, positions(now.realizable), self.solver)
-            except ConvergenceError:
-                self.out.unsolved += 1
-                continue
-            scored.append((self.cost(c.routes, error), c._replace(start=ratios)))
+        jobs = [(c.routes, c.start, now) for c in candidates]
+        found = self.shared(_predict_task, jobs) if self.sharing(jobs) else [self.predict(*job) for job in jobs]
+        scored = [(cost, c._replace(start=ratios)) for c, (cost, ratios) in zip(candidates, found) if cost is not None]
         scored.sort(key=lambda s: s[0])
         return [c for _, c in scored[:self.options.screen]]
+
+    def predict(self, routes: list[Route], start: np.ndarray, now: Layout) -> tuple[float | None, np.ndarray | None]:
+        """The cost of ``routes`` and their contractions (P, T) as one Gauss-Newton step
+        from ``now``'s solution predicts them (None, None where it fails)."""
+        self.out.screened += 1
+        try:
+            error, ratios = predict_realizable(self.problem, [r.tendon() for r in routes], self.settings, start,
+                                               positions(now.realizable), self.solver)
+        except ConvergenceError:
+            self.out.unsolved += 1
+            return None, None
+        return self.cost(routes, error), ratios
 
     # ------------------------------------------------------------ candidates
     def reductions(self, now: Layout) -> list[Candidate]:
@@ -373,6 +397,18 @@ class _Search:
                 break
             now = lay
         return now
+
+
+def _solve_task(spec: tuple, job: tuple[list[Route], np.ndarray, Layout]) -> tuple[Layout | None, dict]:
+    """:meth:`_Search.solve` as a worker process runs it (``job``: routes, start, near)."""
+    search = _Search.again(spec, job[2])
+    return search.solve(*job), search.tally()
+
+
+def _predict_task(spec: tuple, job: tuple[list[Route], np.ndarray, Layout]) -> tuple[tuple, dict]:
+    """:meth:`_Search.predict` as a worker process runs it."""
+    search = _Search.again(spec, job[2])
+    return search.predict(*job), search.tally()
 
 
 def positions(real: RealizableResult) -> list[np.ndarray]:

@@ -191,12 +191,13 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
     1 .. the most any seed has (at most ``max_tendons``), the best layout found,
     finished. With consolidation off (``options.enabled`` false), the seeds as they
     are, no search. ``workers``, a pool of worker processes, share the independent
-    route optimizations (the same front as without them)."""
+    solves and route optimizations (the same front as without them)."""
     t0 = time.perf_counter()
     say = log or (lambda text: None)
     wide = replace(options, gap=max(options.gap, JOIN_GAP))
     search = _Search(problem, state, settings, solver, wide, route_settings(problem, options), "front", log)
     search.out = tally = Consolidation(consolidations[0].layout, 0, 0.0)
+    search.workers = workers
     size = problem.size
     by_count: dict[int, list[Layout]] = {}
     for c in consolidations:
@@ -239,7 +240,7 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
         members = _best(by_count[k], 1, size) if within else by_count[k]
         say(f"front: optimizing the routes of the {'best' if len(members) == 1 else len(members)} "
             f"{k}-tendon layout{'s' if len(members) > 1 else ''}")
-        done = _finish_all(search, workers, members, 1 if within else options.refine)
+        done = _finish_all(search, members, 1 if within else options.refine)
         lay = min(done, key=lambda m: m.cost)
         if k > 1 and k - 1 in front.layouts and lay.error > front.layouts[k - 1].error + PRECISION:
             lay = _one_more(search, front.layouts[k - 1], pool, lay, size)
@@ -253,7 +254,7 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
                     f"{smaller.count}-tendon layout of {100 * smaller.error:.2f}% of L")
                 front.layouts[smaller.count] = smaller
         within = any(m.error <= options.budget for m in front.layouts.values())
-    _extend(search, front, pool, size, options, say, workers)
+    _extend(search, front, pool, size, options, say)
     _descend(search, front, pool, size, say)
     front.evaluations, front.screened = tally.evaluations, tally.screened
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
@@ -342,20 +343,11 @@ def _finish_task(spec: tuple, job: tuple[Layout, int]) -> tuple[Layout, dict]:
     return _finished(search, *job), search.tally()
 
 
-def _shared(search: _Search, workers: Pool, task, jobs: list) -> list:
-    """``task(search's spec, job)`` for every job, shared between ``workers`` and this
-    process, each one's tally added to ``search``'s; the tasks' results in order."""
-    done = workers.map(partial(task, search.spec()), jobs)
-    for _, tally in done:
-        search.add(tally)
-    return [out for out, _ in done]
-
-
-def _finish_all(search: _Search, workers: Pool | None, layouts: list[Layout], rounds: int) -> list[Layout]:
-    """Each of ``layouts`` finished (:func:`_finished`), on ``workers`` too where there are."""
-    if workers is None or not workers.active:
-        return [_finished(search, m, rounds) for m in layouts]
-    return _shared(search, workers, _finish_task, [(m, rounds) for m in layouts])
+def _finish_all(search: _Search, layouts: list[Layout], rounds: int) -> list[Layout]:
+    """Each of ``layouts`` finished (:func:`_finished`), on the search's workers too."""
+    if search.sharing(layouts):
+        return search.shared(_finish_task, [(m, rounds) for m in layouts])
+    return [_finished(search, m, rounds) for m in layouts]
 
 
 def _pooled(search: _Search, consolidations: list[Consolidation], size: float) -> Layout | None:
@@ -449,13 +441,12 @@ def _repair(search: _Search, front: Front, pool: list[Route], size: float, chang
             front.offer([front.layouts[k + 1]], size)
 
 
-def _extensions(search: _Search, layout: Layout, size: float, rounds: int,
-                workers: Pool | None = None) -> list[Layout]:
+def _extensions(search: _Search, layout: Layout, size: float, rounds: int) -> list[Layout]:
     """The solved ``layout`` with one route end carried on straight by ``EXTEND`` x L
     (:func:`~.routes.extend_route`; each end of each route, kept clear of the
     walls; an end the walls cut back to less than half that is left out), each
     solved from ``layout``'s contractions and equilibria and finished (``rounds``;
-    on ``workers`` too where there are)."""
+    on the search's workers too)."""
     jobs = []
     for i, route in enumerate(layout.routes):
         for end in (0, 1):
@@ -464,10 +455,7 @@ def _extensions(search: _Search, layout: Layout, size: float, rounds: int,
             if longer is None or longer.length < route.length + 0.5 * EXTEND * size:
                 continue
             jobs.append((layout, layout.routes[:i] + [longer] + layout.routes[i + 1:], rounds))
-    if workers is None or not workers.active:
-        found = [_extended(search, *job) for job in jobs]
-    else:
-        found = _shared(search, workers, _extension_task, jobs)
+    found = search.shared(_extension_task, jobs) if search.sharing(jobs) else [_extended(search, *j) for j in jobs]
     return [lay for lay in found if lay is not None]
 
 
@@ -486,19 +474,19 @@ def _extension_task(spec: tuple, job: tuple[Layout, list[Route], int]) -> tuple[
 
 
 def _extend(search: _Search, front: Front, pool: list[Route], size: float, options: ConsolidationSettings,
-            say: Callable[[str], None], workers: Pool | None = None) -> None:
+            say: Callable[[str], None]) -> None:
     """The front's extension (module docstring), in place: up to one count above the
     first within the budget (where none is, the most tendons only), the best of
     each count's layout and its extensions (:func:`_extensions`, each offered to
     the finer mesh); then the monotone repair (:func:`_repair`) above each count
-    whose layout an extension replaced. ``workers`` share the extensions."""
+    whose layout an extension replaced."""
     within = [k for k, lay in front.layouts.items() if lay.error <= options.budget]
     counts = [k for k in sorted(front.layouts) if k <= min(within) + 1] if within else sorted(front.layouts)[-1:]
     changed = set()
     for k in counts:
         held = front.layouts[k]
         say(f"front: the {k}-tendon layout with each route end carried on by {EXTEND:g} L")
-        found = _extensions(search, held, size, options.refine, workers)
+        found = _extensions(search, held, size, options.refine)
         front.offer(found, size)
         best = min(found, key=lambda lay: lay.cost, default=None)
         if best is not None and best.cost < held.cost:
@@ -543,6 +531,7 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
     fine_state = pose_only_state(fine)
     search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
     search.out = Consolidation(next(iter(front.layouts.values())), 0, 0.0)
+    search.workers = workers
     size = problem.size
     out: dict[int, RealizableResult | None] = {}
     spec = (fine, fine_state, settings, solver)

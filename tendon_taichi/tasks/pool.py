@@ -1,12 +1,14 @@
 """A few worker processes that share the independent pieces of one job with
-the process that runs it (``design`` uses it for the front's route
-optimizations, which are independent of each other and take most of its time).
+the process that runs it (``design`` shares its extractors' consolidations and
+its front's solves and route optimizations, which are independent of each
+other and take most of its time).
 
 :class:`Pool` starts ``workers`` processes (``spawn``: a fresh interpreter, no
 copy of a running Taichi) that each run ``setup`` once, at once - they warm up
 while the job goes on. :meth:`Pool.map` then runs ``fn(item)`` for every item:
-each worker is handed one item at a time and this process takes the next
-item itself while they work, so ``workers = cores - 1`` keeps every core busy.
+each worker is handed the next item as soon as it finishes one, and this
+process takes the next one itself whenever it is free, so ``workers = cores -
+1`` keeps every core busy.
 The results come back in the items' order and are those of
 ``[fn(item) for item in items]`` whenever ``fn`` depends only on its
 argument: which process ran an item does not change what it gives.
@@ -27,7 +29,8 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+import threading
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Iterable
 
@@ -72,35 +75,48 @@ class Pool:
 
     def map(self, fn: Callable[[Any], Any], items: Iterable[Any]) -> list[Any]:
         """``[fn(item) for item in items]``, the items shared between the workers and
-        this process (module docstring)."""
+        this process (module docstring): each worker is handed the next item as it
+        finishes one, and this process takes the next one whenever it is free."""
         items = list(items)
         if self._executor is None or len(items) < 2:
             return [fn(item) for item in items]
-        out: list[Any] = [None] * len(items)
-        running: dict[Future, int] = {}
-        nxt = 0
-        while nxt < len(items) or running:
-            while self._executor is not None and len(running) < self.workers and nxt < len(items):
-                running[self._submit(fn, items[nxt])] = nxt
-                nxt += 1
-            if nxt < len(items):  # this process's share: the next item, while the workers have theirs
-                out[nxt] = fn(items[nxt])
-                nxt += 1
-            else:
-                wait(list(running), return_when=FIRST_COMPLETED)
-            for future in [f for f in running if f.done()]:
-                i = running.pop(future)
-                out[i] = self._result(future, fn, items[i])
-        return out
+        lock = threading.Lock()
+        taken = [0]
+        futures: dict[int, Future] = {}
 
-    def _submit(self, fn, item) -> Future:
-        try:
-            return self._executor.submit(fn, item)
-        except BrokenProcessPool as exc:  # broken since the last call: a future that runs it here
-            self._break(exc)
-            done: Future = Future()
-            done.set_result(fn(item))
-            return done
+        def take() -> int | None:
+            i = taken[0]
+            if i == len(items):
+                return None
+            taken[0] += 1
+            return i
+
+        def feed(_done: Future | None = None) -> None:  # a worker is free: hand it the next item
+            with lock:
+                executor = self._executor
+                i = take() if executor is not None else None
+                if i is None:
+                    return
+                try:
+                    futures[i] = executor.submit(fn, items[i])
+                except (BrokenProcessPool, RuntimeError):  # broken or closed meanwhile: this process runs it
+                    futures[i] = Future()
+                    futures[i].set_exception(BrokenProcessPool("the pool stopped"))
+                    return
+            futures[i].add_done_callback(feed)
+
+        out: list[Any] = [None] * len(items)
+        for _ in range(self.workers):
+            feed()
+        while True:
+            with lock:
+                i = take()
+            if i is None:
+                break
+            out[i] = fn(items[i])
+        for i, future in futures.items():
+            out[i] = self._result(future, fn, items[i])
+        return out
 
     def _result(self, future: Future, fn, item):
         try:
