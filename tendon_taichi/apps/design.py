@@ -109,11 +109,16 @@ def tendon_rows(layout: Layout, mu: float) -> list[dict]:
     return rows
 
 
+#: the most worker processes ``design`` starts by default: each holds its own copy of the problem
+#: and its compiled kernels, and the front's batches are a few to a few dozen pieces
+MAX_DEFAULT_WORKERS = 4
+
+
 def default_workers() -> int:
-    """Worker processes ``design`` starts by default: one per core it may use
-    but the one it runs on."""
-    return max(0, len(os.sched_getaffinity(0)) - 1) if hasattr(os, "sched_getaffinity") else \
-        max(0, (os.cpu_count() or 1) - 1)
+    """Worker processes ``design`` starts by default: one per core it may use but
+    the one it runs on, at most :data:`MAX_DEFAULT_WORKERS`."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return max(0, min(cores - 1, MAX_DEFAULT_WORKERS))
 
 
 def start_worker(arch: str, threads: int | None) -> None:
@@ -150,8 +155,10 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     consolidation (unless ``consolidation`` says otherwise) and picks the
     recommendation; ``png`` draws design.png and front.png; ``beam`` and ``converge``
     as for :func:`recommended`; ``workers`` processes (started at once, warming up
-    while the contractions are optimized) share the front's route optimizations -
-    the same design, sooner where there are idle cores."""
+    while the contractions are optimized) share the consolidations and the front's
+    solves and route optimizations - the same design, sooner where there are idle
+    cores (from a script: under ``if __name__ == "__main__":``, as
+    :mod:`~tendon_taichi.tasks.pool` says)."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     out = Path(out) if out is not None else default_out(scene, level)
@@ -182,7 +189,7 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
     front entry solved again on the next finer mesh (``converge``), and the layout
     recommended (:func:`recommend`): the extraction, the layout and the summary
     ``design.json`` holds (no file is written). ``workers`` (a pool of worker
-    processes) share the front's independent pieces."""
+    processes) share the consolidations and the front's independent pieces."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     cons = consolidation or ConsolidationSettings(budget=budget)

@@ -105,8 +105,8 @@ def add_commands(sub) -> None:
                    help=f"give up on an extractor that runs longer than S seconds (default {PLUGIN_TIMEOUT:g})")
     s.add_argument("--no-png", action="store_true", help="skip design.png and front.png")
     s.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="worker processes that share the front's route optimizations (default: one per core "
-                        "but one; 0: none) - the same design either way")
+                   help="worker processes that share the consolidations and the front's solves (default: one "
+                        "per core but one, at most 4; 0: none) - the same design either way")
     s.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_optimize_flags(s)
     add_json(s)
