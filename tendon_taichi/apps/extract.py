@@ -214,30 +214,31 @@ def _run_shared(names: list[str], problem: Problem, state: IdealizedState, optio
     on ``workers`` and here at once: the plugins run here one after the other,
     then every distinct set of tendons is consolidated (the same results)."""
     say = log or (lambda text: None)
-    t0 = {}
-    found = {}
+    found, plugin_s = {}, {}
     for n in names:
-        t0[n] = time.perf_counter()
+        t0 = time.perf_counter()
         found[n] = _plugin_tendons(n, problem, state, options.get(n), timeout, say)
+        plugin_s[n] = time.perf_counter() - t0
     first: dict[tuple, str] = {}
     for n in names:
         if not isinstance(found[n], ExtractorResult):
             first.setdefault(_key(found[n]), n)
     jobs = [(n, found[n]) for n in first.values()]
-    say(f"consolidating the tendons of {len(jobs)} extractor(s) in {min(len(jobs), workers.active + 1)} processes")
+    shared = min(len(jobs), workers.active + 1)
+    say(f"consolidating the tendons of {len(jobs)} extractor(s) in {shared} process{'es' if shared > 1 else ''}")
     spec = (problem, state, run.settings, consolidation, solver)
     made = dict(zip(first.values(), workers.map(partial(_consolidate_task, spec), jobs)))
     results = []
     for n in names:
         if isinstance(found[n], ExtractorResult):
-            results.append(replace(found[n], time_s=time.perf_counter() - t0[n]))
+            results.append(replace(found[n], time_s=plugin_s[n]))
             continue
         source = first[_key(found[n])]
         cons, took = made[source]
         if source != n and not isinstance(cons, str):
             cons = cons.relabel(n)
             say(f"{n}: the same tendons as {source}")
-        start = time.perf_counter() - (took if source == n else 0.0)
+        start = time.perf_counter() - plugin_s[n] - (took if source == n else 0.0)
         results.append(_scored(n, problem, state, cons, run, solver, ms, start, say))
     return results
 

@@ -173,8 +173,10 @@ def host_view(arr) -> "np.ndarray | None":
     dtype = {ti.f64: np.float64, ti.i32: np.int32}[arr.dtype]
     n = int(arr.shape[0])
     address = ti.lang.impl.get_runtime().prog.get_ndarray_data_ptr_as_int(arr.arr)
-    if n == 0 or not address:
+    if n == 0:
         return np.zeros(0, dtype=dtype)
+    if not address:  # no host memory to show: the copy kernels it is
+        return None
     raw = (ctypes.c_byte * (n * np.dtype(dtype).itemsize)).from_address(address)
     return np.frombuffer(raw, dtype=dtype)
 
