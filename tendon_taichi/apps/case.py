@@ -5,20 +5,19 @@ folder of its own. ``bench``, ``sweep``, ``planted-bench`` and the workers'
 warm-up all run cases through :func:`run_case`; each turns the
 :class:`~tendon_taichi.apps.design.Design` into its own figures.
 
-:func:`start_worker` is the set-up every worker process of the task engine
-runs once (start Taichi, compile the kernels by a short case,
-:func:`~tendon_taichi.apps.design.warm_up`)."""
+:func:`start_worker` (:func:`tendon_taichi.apps.design.start_worker`, here too)
+is the set-up every worker process of the task engine runs once (start
+Taichi, compile the kernels by a short case)."""
 
 from __future__ import annotations
 
-import time
 from functools import partial
 from pathlib import Path
 
 from ..body.scene import Scene
 from ..extract.settings import BEAM, BUDGET, ConsolidationSettings
 from ..physics import runtime
-from .design import Design, design, warm_up
+from .design import Design, design, start_worker
 from .optimize import Interrupted
 
 #: what stops a whole run of cases when a case raises it (Ctrl-C inside an in-process case)
@@ -36,18 +35,6 @@ def run_case(scene: Scene, level: int, out: str | Path, solver: str = "auto",
     return design(scene, level, out, solver, budget, extractors=extractors,
                   consolidation=consolidation or ConsolidationSettings(budget=budget), png=png, beam=beam,
                   converge=converge)
-
-
-def start_worker(threads: int | None, arch: str | None = None, warm: bool = True) -> dict:
-    """A task engine's worker set-up: start Taichi (``arch``, ``threads``) and warm
-    up; returns the times (``init_s``, ``warm_up_s``)."""
-    t0 = time.perf_counter()
-    runtime.configure(arch=arch, threads=threads)
-    runtime.init()
-    out = {"init_s": time.perf_counter() - t0, "warm_up_s": None}
-    if warm:
-        out["warm_up_s"] = warm_up()
-    return out
 
 
 def worker_setup(warm: bool = True):

@@ -121,12 +121,18 @@ def default_workers() -> int:
     return max(0, min(cores - 1, MAX_DEFAULT_WORKERS))
 
 
-def start_worker(arch: str, threads: int | None) -> None:
-    """A design worker process's set-up: Taichi on ``arch`` with ``threads``, its
-    kernels compiled by a short design (:func:`warm_up`)."""
+def start_worker(threads: int | None, arch: str | None = None, warm: bool = True) -> dict:
+    """A worker process's set-up (``design``'s pool, the task engine's Dask
+    workers): start Taichi (``arch``, ``threads``) and, with ``warm``, compile the
+    kernels by a short design (:func:`warm_up`); returns the times (``init_s``,
+    ``warm_up_s``)."""
+    t0 = time.perf_counter()
     runtime.configure(arch=arch, threads=threads)
     runtime.init()
-    warm_up()
+    out = {"init_s": time.perf_counter() - t0, "warm_up_s": None}
+    if warm:
+        out["warm_up_s"] = warm_up()
+    return out
 
 
 def warm_up() -> float:
@@ -164,7 +170,8 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     out = Path(out) if out is not None else default_out(scene, level)
     for name in FILES:
         check_writable(out / name, "output")
-    with Pool(workers, start_worker, (runtime.info()["arch"], runtime.info()["threads"])) as pool:
+    here = runtime.info()
+    with Pool(workers, start_worker, (here["threads"], here["arch"])) as pool:
         progress.message(f"design: optimizing {scene.name} at level {level}"
                          + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
         run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)

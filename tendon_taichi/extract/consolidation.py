@@ -262,19 +262,15 @@ class _Search:
         that cannot be solved are left out."""
         if self.options.screen and len(candidates) > self.options.screen:
             candidates = self._screened(candidates, now)
-        if self.sharing(candidates):
-            layouts = self.shared(_solve_task, [(c.routes, c.start, now) for c in candidates])
-        else:
-            layouts = [self.solve(c.routes, c.start, now) for c in candidates]
+        layouts = self.each(self.solve, _solve_task, [(c.routes, c.start, now) for c in candidates])
         return sorted([s for s in zip(candidates, layouts) if s[1] is not None], key=lambda s: s[1].cost)
 
-    def sharing(self, jobs: list) -> bool:
-        """Whether these jobs go to the workers (there are some, and more than one job)."""
-        return self.workers is not None and self.workers.active > 0 and len(jobs) > 1
-
-    def shared(self, task, jobs: list) -> list:
-        """``task(spec, job)`` for every job, shared with the workers, each one's tally
-        added to this search's; the results in order."""
+    def each(self, here: Callable, task: Callable, jobs: list[tuple]) -> list:
+        """``here(*job)`` for every job, in order: in this process, or - where there are
+        workers and more than one job - as ``task(spec, job)`` shared with them (the
+        same results), each one's tally added to this search's."""
+        if self.workers is None or not self.workers.active or len(jobs) < 2:
+            return [here(*job) for job in jobs]
         done = self.workers.map(partial(task, self.spec()), jobs)
         for _, tally in done:
             self.add(tally)
@@ -298,8 +294,7 @@ class _Search:
     def _screened(self, candidates: list[Candidate], now: Layout) -> list[Candidate]:
         """The ``screen`` candidates of least cost as one Gauss-Newton step predicts
         them from the current layout's solution, each with its predicted contractions."""
-        jobs = [(c.routes, c.start, now) for c in candidates]
-        found = self.shared(_predict_task, jobs) if self.sharing(jobs) else [self.predict(*job) for job in jobs]
+        found = self.each(self.predict, _predict_task, [(c.routes, c.start, now) for c in candidates])
         scored = [(cost, c._replace(start=ratios)) for c, (cost, ratios) in zip(candidates, found) if cost is not None]
         scored.sort(key=lambda s: s[0])
         return [c for _, c in scored[:self.options.screen]]

@@ -345,9 +345,7 @@ def _finish_task(spec: tuple, job: tuple[Layout, int]) -> tuple[Layout, dict]:
 
 def _finish_all(search: _Search, layouts: list[Layout], rounds: int) -> list[Layout]:
     """Each of ``layouts`` finished (:func:`_finished`), on the search's workers too."""
-    if search.sharing(layouts):
-        return search.shared(_finish_task, [(m, rounds) for m in layouts])
-    return [_finished(search, m, rounds) for m in layouts]
+    return search.each(partial(_finished, search), _finish_task, [(m, rounds) for m in layouts])
 
 
 def _pooled(search: _Search, consolidations: list[Consolidation], size: float) -> Layout | None:
@@ -455,7 +453,7 @@ def _extensions(search: _Search, layout: Layout, size: float, rounds: int) -> li
             if longer is None or longer.length < route.length + 0.5 * EXTEND * size:
                 continue
             jobs.append((layout, layout.routes[:i] + [longer] + layout.routes[i + 1:], rounds))
-    found = search.shared(_extension_task, jobs) if search.sharing(jobs) else [_extended(search, *j) for j in jobs]
+    found = search.each(partial(_extended, search), _extension_task, jobs)
     return [lay for lay in found if lay is not None]
 
 
