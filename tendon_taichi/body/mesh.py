@@ -131,7 +131,7 @@ class Mesh:
         k = min(k, self.n_triangles)
         _, cand = self._centroid_tree.query(points, k=k)
         cand = cand.reshape(q, k)
-        dist = np.stack([self._distance_to_triangles(points, cand[:, j]) for j in range(k)], 1)
+        dist = self._distance_to_triangles(np.repeat(points, k, axis=0), cand.ravel()).reshape(q, k)
         best = np.argmin(dist, axis=1)
         tri = cand[np.arange(q), best]
         d = dist[np.arange(q), best]

@@ -29,6 +29,7 @@ which is not symmetric: :class:`FrictionJacobian` applies ``E`` and
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -99,15 +100,22 @@ class CapstanState:
     w: np.ndarray
     rho: np.ndarray
 
-    @property
+    @cached_property
     def n(self) -> np.ndarray:
         """Unit segment directions (S, 2)."""
         return self.d / np.maximum(self.l, 1e-300)[:, None]
 
-    @property
+    @cached_property
     def dphi(self) -> np.ndarray:
         """d(direction angle)/d(segment vector) per segment, perp(d) / l^2 (S, 2)."""
         return perp(self.d) / np.maximum(self.l * self.l, 1e-300)[:, None]
+
+
+def _scatter(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """(n, 2): the rows of ``values`` (k, 2) summed into rows ``index`` (k,), in
+    order - ``np.add.at`` on zeros, the same sums, by ``np.bincount``."""
+    return np.stack([np.bincount(index, values[:, 0], minlength=n),
+                     np.bincount(index, values[:, 1], minlength=n)], axis=1)
 
 
 class PointMap:
@@ -127,9 +135,7 @@ class PointMap:
         return np.einsum("pk,pkd->pd", self.bary, v[self.nodes])
 
     def to_nodes(self, q: np.ndarray) -> np.ndarray:
-        out = np.zeros((self.n, 2))
-        np.add.at(out, self.nodes.ravel(), (self.bary[:, :, None] * q[:, None, :]).reshape(-1, 2))
-        return out * self.free
+        return _scatter(self.nodes.ravel(), (self.bary[:, :, None] * q[:, None, :]).reshape(-1, 2), self.n) * self.free
 
 
 class FrictionJacobian:
@@ -156,11 +162,10 @@ class FrictionJacobian:
 
     def segment_forces(self, coef: np.ndarray, vec: np.ndarray) -> np.ndarray:
         """Point vectors (P, 2) of sum_s coef_s (vec_s at b(s), -vec_s at a(s))."""
-        q = np.zeros((len(self.st.points), 2))
         f = coef[:, None] * vec
-        np.add.at(q, self.cap.seg[:, 1], f)
-        np.add.at(q, self.cap.seg[:, 0], -f)
-        return q
+        seg = self.cap.seg
+        # what np.add.at adds (the b ends, then the a ends), in the same order
+        return _scatter(np.concatenate([seg[:, 1], seg[:, 0]]), np.concatenate([f, -f]), len(self.st.points))
 
     def joint_rates(self, V: np.ndarray) -> np.ndarray:
         """d theta_j (S,) for point displacements V (P, 2) (0 where no joint)."""

@@ -60,6 +60,7 @@ class FastKernel:
         self.fast = None not in self.kinds and self.primal.autodiff_mode == AutodiffMode.NONE
         #: per kind of arguments: (the C++ kernel, its compiled data, the program)
         self.compiled: dict[tuple, tuple] = {}
+        self.readers = [_reader(rt, (i,)) for i, rt in enumerate(self.primal.return_type or ())]
 
     def _key(self, args: tuple) -> tuple | None:
         """The kind of these arguments (None: not one this launcher passes)."""
@@ -116,5 +117,23 @@ class FastKernel:
         ti.sync()
         if returns is None:
             return None
-        out = [self.primal.construct_kernel_ret(ctx, rt, (i,)) for i, rt in enumerate(returns)]
+        out = [read(ctx) if read else self.primal.construct_kernel_ret(ctx, rt, (i,))
+               for i, (rt, read) in enumerate(zip(returns, self.readers))]
         return out[0] if len(out) == 1 else out
+
+
+def _reader(ret_type, index: tuple):
+    """A function reading a returned value of ``ret_type`` at ``index`` from a launch
+    context - a number, or a vector's entries as a tuple of numbers - in place of
+    Taichi's objects for them (a ``ti.Vector`` costs 20 us to make); None: Taichi's way."""
+    from taichi.lang.matrix import VectorType
+    from taichi.types import primitive_types
+
+    if any(ret_type is t for t in (ti.i8, ti.i16, ti.i32, ti.i64)):
+        return lambda ctx: ctx.get_struct_ret_int(index)
+    if id(ret_type) in primitive_types.real_type_ids:
+        return lambda ctx: ctx.get_struct_ret_float(index)
+    if isinstance(ret_type, VectorType) and ret_type.dtype in primitive_types.real_types:
+        entries = [index + (j,) for j in range(ret_type.m * ret_type.n)]
+        return lambda ctx: tuple(ctx.get_struct_ret_float(e) for e in entries)
+    return None

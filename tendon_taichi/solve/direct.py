@@ -119,20 +119,45 @@ class Factorization:
         return self.solve_ordered(bp)[self.order]
 
 
-#: per mesh and clamp set, the elements' fill-reducing ordering and their sorted
-#: pattern keys with each entry's place among them (:class:`_ElementPattern`; shared by tendon layouts)
+#: per mesh and clamp set, the elements' part of a tendon robot's pattern
+#: (:class:`_ElementPattern`; shared by tendon layouts)
 _ELEMENT_PATTERN: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+#: sparsity patterns a direct solver keeps at hand (a route's points move back and
+#: forth across the same triangle edges while its route is optimized)
+PATTERNS_KEPT = 4
 
 
 @dataclass
 class _ElementPattern:
-    """The element entries' part of a tendon robot's pattern: ``order`` (nf,) the
-    fill-reducing ordering, ``keys`` the distinct sorted keys ``col nf + row`` of
-    the kept entries in that order, ``pos`` each kept entry's index in ``keys``."""
+    """The element entries' part of a tendon robot's pattern: ``keep`` (36 m,) which
+    entries of the element blocks lie on free DOFs, ``rows``/``cols`` those entries
+    in the free numbering, ``order`` (nf,) the fill-reducing ordering, ``keys`` the
+    distinct sorted keys ``col nf + row`` of the kept entries in that order, ``pos``
+    each kept entry's index in ``keys``."""
 
+    keep: np.ndarray
+    rows: np.ndarray
+    cols: np.ndarray
     order: np.ndarray
     keys: np.ndarray
     pos: np.ndarray
+
+
+@dataclass
+class _Pattern:
+    """A sparsity pattern of the Hessian on the free DOFs in the fill-reducing
+    ``order``: ``keep`` which element and segment entries lie on free DOFs, ``pos``
+    each kept entry's index among the ``nnz`` CSC entries (``indices``, ``indptr``),
+    and the :class:`LDL` of the pattern once one was made."""
+
+    keep: np.ndarray
+    order: np.ndarray
+    pos: np.ndarray
+    indices: np.ndarray
+    indptr: np.ndarray
+    nnz: int
+    ldl: LDL | None = None
 
 
 class DirectSolver(LinearSolver):
@@ -153,62 +178,83 @@ class DirectSolver(LinearSolver):
         self.ordered = ordered
         self.factor = None  # the last factorization, reused by chord steps and predictors
         self.factor_exact = False
+        self._patterns: dict[bytes, _Pattern] = {}  # by triangles of the cables' points, oldest first
         self._build_structure()
 
     def _build_structure(self) -> None:
         m = self.model
-        T = m.mesh.triangles
         cab = m.cables
         self._tri = cab.points.tri.copy()
-        edofs = (2 * T[:, :, None] + np.arange(2)).reshape(-1, 6)  # (m, 6)
-        pt_nodes = T[cab.points.tri] if m.P else np.zeros((0, 3), np.int64)
+        pt_nodes = m.mesh.triangles[cab.points.tri] if m.P else np.zeros((0, 3), np.int64)
         seg_nodes = np.concatenate([pt_nodes[cab.segments[:, 0]], pt_nodes[cab.segments[:, 1]]], 1)
         self.seg_coef = _segment_coefficients(cab)
         self.sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)  # (S, 12)
+        self.shape = (int(self.free.sum()),) * 2
+        key = self._tri.tobytes() + cab.segments.tobytes()
+        pattern = self._patterns.pop(key, None) or self._pattern()
+        self._patterns[key] = pattern  # the most recent last
+        while len(self._patterns) > PATTERNS_KEPT:
+            self._patterns.pop(next(iter(self._patterns)))
+        self.pattern = pattern
+        self.keep, self.order, self.pos = pattern.keep, pattern.order, pattern.pos
+        self.indices, self.indptr, self.nnz = pattern.indices, pattern.indptr, pattern.nnz
+
+    def _pattern(self) -> _Pattern:
+        """The pattern of the element and segment entries (``self.sdofs``)."""
+        m = self.model
+        nf = self.shape[0]
         free_index = np.cumsum(self.free) - 1
-        nf = int(self.free.sum())
-        re, ce = np.repeat(edofs, 6, axis=1).ravel(), np.tile(edofs, (1, 6)).ravel()
         rs, cs = np.repeat(self.sdofs, 12, axis=1).ravel(), np.tile(self.sdofs, (1, 12)).ravel()
-        keep_e, keep_s = self.free[re] & self.free[ce], self.free[rs] & self.free[cs]
-        self.keep = np.concatenate([keep_e, keep_s])
-        re, ce = free_index[re[keep_e]], free_index[ce[keep_e]]
+        keep_s = self.free[rs] & self.free[cs]
         rs, cs = free_index[rs[keep_s]], free_index[cs[keep_s]]
+        elements = self._element_pattern(free_index, nf)
+        keep = np.concatenate([elements.keep, keep_s])
         if self.ordered and not m.single:  # tendons: the elements' ordering (the segments add local couplings)
-            elements = self._element_pattern(re, ce, nf)
-            self.order = elements.order
-            uniq, self.pos = _merged(elements, self.order[cs].astype(np.int64) * nf + self.order[rs])
+            order = elements.order
+            uniq, pos = _merged(elements, order[cs].astype(np.int64) * nf + order[rs])
         else:
-            r, c = np.concatenate([re, rs]), np.concatenate([ce, cs])
+            r, c = np.concatenate([elements.rows, rs]), np.concatenate([elements.cols, cs])
             if not self.ordered:  # the free DOFs' own numbering (for preconditioners that need no ordering)
-                self.order = np.arange(nf)
+                order = np.arange(nf)
             else:  # the fiber lattice: its own ordering
-                self.order = _fill_reducing_order(r, c, nf)
-            uniq, self.pos = np.unique(self.order[c].astype(np.int64) * nf + self.order[r], return_inverse=True)
-        self.indices = (uniq % nf).astype(np.int32)
-        self.indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
-        self.shape = (nf, nf)
-        self.nnz = len(uniq)
-        self.ldl: LDL | None = None  # made with the first factorization
+                order = _fill_reducing_order(r, c, nf)
+            uniq, pos = np.unique(order[c].astype(np.int64) * nf + order[r], return_inverse=True)
+        indices = (uniq % nf).astype(np.int32)
+        indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
+        return _Pattern(keep, order, pos, indices, indptr, len(uniq))
+
+    @property
+    def ldl(self) -> LDL | None:
+        """The LDL^T of the current pattern (made with its first factorization)."""
+        return self.pattern.ldl
 
     def cables_moved(self) -> None:
         """The model's cables moved (:meth:`~tendon_taichi.physics.model.Model.move_cables`):
         new barycentric weights, and where a point moved to another triangle a new
-        sparsity pattern; the last factorization is forgotten."""
+        sparsity pattern (one of the last few again where it was one of theirs);
+        the last factorization is forgotten."""
         if np.array_equal(self.model.cables.points.tri, self._tri):
             self.seg_coef = _segment_coefficients(self.model.cables)
         else:
             self._build_structure()
         self.reset()
 
-    def _element_pattern(self, r: np.ndarray, c: np.ndarray, nf: int) -> _ElementPattern:
-        """The elements' pattern (kept entries ``r``, ``c`` in the free numbering),
-        computed once per mesh and clamp set."""
+    def _element_pattern(self, free_index: np.ndarray, nf: int) -> _ElementPattern:
+        """The elements' part of the pattern (``free_index``: each DOF's index among
+        the free ones), computed once per mesh and clamp set."""
         cache = _ELEMENT_PATTERN.setdefault(self.model.mesh, {})
-        key = self.free.tobytes()
+        key = (self.free.tobytes(), self.ordered and not self.model.single)
         if key not in cache:
-            order = _fill_reducing_order(r, c, nf)
-            keys, pos = np.unique(order[c].astype(np.int64) * nf + order[r], return_inverse=True)
-            cache[key] = _ElementPattern(order, keys, pos)
+            T = self.model.mesh.triangles
+            edofs = (2 * T[:, :, None] + np.arange(2)).reshape(-1, 6)  # (m, 6)
+            re, ce = np.repeat(edofs, 6, axis=1).ravel(), np.tile(edofs, (1, 6)).ravel()
+            keep = self.free[re] & self.free[ce]
+            r, c = free_index[re[keep]], free_index[ce[keep]]
+            order, keys, pos = None, None, None
+            if key[1]:
+                order = _fill_reducing_order(r, c, nf)
+                keys, pos = np.unique(order[c].astype(np.int64) * nf + order[r], return_inverse=True)
+            cache[key] = _ElementPattern(keep, r, c, order, keys, pos)
         return cache[key]
 
     def _low_rank(self) -> tuple[np.ndarray, np.ndarray]:
@@ -253,9 +299,9 @@ class DirectSolver(LinearSolver):
 
     def factorize(self, H: Assembled) -> Factorization:
         """Factorize an ordered Hessian (:meth:`assemble_ordered`)."""
-        if self.ldl is None:
-            self.ldl = LDL(self.indptr, self.indices, self.shape[0])
-        return Factorization(H, self.order, self.ldl)
+        if self.pattern.ldl is None:
+            self.pattern.ldl = LDL(self.indptr, self.indices, self.shape[0])
+        return Factorization(H, self.order, self.pattern.ldl)
 
     def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:
         lu = self.factorize(H)
