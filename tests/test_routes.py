@@ -180,3 +180,35 @@ def test_a_route_moved_across_triangles_gives_what_a_new_robot_gives():
     assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
     assert f == ik.last_value() and np.array_equal(g, ik._last[2])
     assert all(np.array_equal(u, v) for u, v in zip(ik.adjoints, fresh.adjoints))
+
+
+def test_a_route_moved_back_reuses_its_earlier_pattern():
+    """A step back into the triangles of an earlier step takes that step's sparsity
+    pattern and LDL^T analysis again (no new ones), and the evaluation there is bit
+    for bit a new robot's of the same cables from the same equilibria."""
+    from tendon_taichi.optimizer.soft_ik import SoftIK
+
+    p = build_problem(load_scene("t_shape"), 1)
+    L = p.size
+    t = np.linspace(0, 1, 12)
+    routes = [fit_route(np.stack([0.04 * t, 0.075 - 0.004 * np.sin(np.pi * t)], 1), L, 0.4)]
+    rs = RouteSettings(friction=0.3, clearance=0.02 * L)
+    obj = RouteObjective(p, routes, p.scene.optimize, rs, "direct")
+    z0 = obj.pack(routes, np.array([[0.08]]))
+    obj.evaluate(z0)
+    linear = obj.ik.poses[0].linear
+    first, ldl = linear.pattern, linear.ldl
+    z1 = z0.copy()
+    z1[1:obj.n_control:2] -= 0.003 / L
+    obj.evaluate(z1)
+    assert linear.pattern is not first
+    start = [x.copy() for x in obj.positions]
+    obj.evaluate(z0)
+    assert linear.pattern is first and linear.ldl is ldl and ldl is not None
+    fresh = SoftIK(p, p.scene.optimize, "direct", cables=obj.ik.model.cables)
+    fresh.eval_tol = obj.ik.eval_tol
+    for ps, x in zip(fresh.poses, start):
+        ps.model.set_positions(x)
+    f, g = fresh.evaluate(obj.unpack(z0)[1].ravel())
+    assert f == obj.ik.last_value() and np.array_equal(g, obj.ik._last[2])
+    assert all(np.array_equal(u, v) for u, v in zip(obj.ik.adjoints, fresh.adjoints))

@@ -270,8 +270,9 @@ class DirectSolver(LinearSolver):
         taut = np.flatnonzero(kc > 0.0)
         full = np.zeros((2 * m.n, len(taut)))
         st = m.cables.start
-        for j, c in enumerate(taut):
-            np.add.at(full[:, j], self.sdofs[st[c]:st[c + 1]].ravel(), grad[st[c]:st[c + 1]].ravel())
+        for j, c in enumerate(taut):  # np.bincount adds in order, as np.add.at would
+            full[:, j] = np.bincount(self.sdofs[st[c]:st[c + 1]].ravel(), grad[st[c]:st[c + 1]].ravel(),
+                                     minlength=2 * m.n)
         U = np.empty((nf, len(taut)))
         U[self.order] = full[self.free]
         return U, kc[taut]
