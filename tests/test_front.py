@@ -295,7 +295,7 @@ def test_a_route_cut_short_is_carried_on_along_its_tangent(searched):
     assert longer.waypoints[-1, 0] == pytest.approx(0.025 - EXTEND * p.size, abs=1e-6)  # ... past the cut
     np.testing.assert_allclose(extend_route(arm, 0, 0.01, p.size).waypoints[0], [0.055, 0.075], atol=1e-6)
     short = search.solve([arm, stem], search.start_ratios([arm, stem], np.array([[0.4, 0.4]])))
-    found = _extensions(search, short, p.size, OPTIONS.refine)
+    found, = _extensions(search, [short], p.size, OPTIONS.refine)
     best = min(found, key=lambda lay: lay.cost)
     assert best.routes[0].waypoints[:, 0].min() < 0.025 - 0.5 * EXTEND * p.size  # the cut end carried on
     assert best.error < 0.5 * short.error and best.cost < short.cost

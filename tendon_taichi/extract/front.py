@@ -233,14 +233,21 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
         by_count[k] = by_count[k] + [lay for lay in found if _key(lay, size) not in kept]
     counts = [k for k in sorted(by_count) if by_count[k] and (max_tendons is None or k <= max_tendons)]
     within = False
-    for k in counts:
+    ahead: dict[int, list[Layout]] = {}
+    for i, k in enumerate(counts):
         # up to the first count within the budget, every layout the beam kept (and the exhaustive
         # search found) is finished - route optimization can reorder them: a join often gains
-        # most; above it, the best, one round
-        members = _best(by_count[k], 1, size) if within else by_count[k]
-        say(f"front: optimizing the routes of the {'best' if len(members) == 1 else len(members)} "
-            f"{k}-tendon layout{'s' if len(members) > 1 else ''}")
-        done = _finish_all(search, members, 1 if within else options.refine)
+        # most; above it, the best, one round - those of every count above at once (they do not
+        # depend on each other, and once a count is within the budget one stays within it)
+        if within and not ahead:
+            ahead = _finish_ahead(search, {j: _best(by_count[j], 1, size)[0] for j in counts[i:]})
+        if k in ahead:
+            done = ahead[k]
+        else:
+            members = by_count[k]
+            say(f"front: optimizing the routes of the {'best' if len(members) == 1 else len(members)} "
+                f"{k}-tendon layout{'s' if len(members) > 1 else ''}")
+            done = _finish_all(search, members, options.refine)
         lay = min(done, key=lambda m: m.cost)
         if k > 1 and k - 1 in front.layouts and lay.error > front.layouts[k - 1].error + PRECISION:
             lay = _one_more(search, front.layouts[k - 1], pool, lay, size)
@@ -348,6 +355,16 @@ def _finish_all(search: _Search, layouts: list[Layout], rounds: int) -> list[Lay
     return search.each(partial(_finished, search), _finish_task, [(m, rounds) for m in layouts])
 
 
+def _finish_ahead(search: _Search, best: dict[int, Layout]) -> dict[int, list[Layout]]:
+    """Each count's ``best`` layout finished, one round, all in one batch: per count,
+    a list of the one finished layout."""
+    counts = sorted(best)
+    span = f"{counts[0]}-tendon" if len(counts) == 1 else f"{counts[0]}- to {counts[-1]}-tendon"
+    search.log(f"front: optimizing the routes of the best {span} layout{'s' if len(counts) > 1 else ''}")
+    done = _finish_all(search, [best[k] for k in counts], 1)
+    return {k: [lay] for k, lay in zip(counts, done)}
+
+
 def _pooled(search: _Search, consolidations: list[Consolidation], size: float) -> Layout | None:
     """The union of every extractor's consolidated routes (near duplicates once),
     solved from each route's contractions in its own layout; None when it adds
@@ -439,12 +456,12 @@ def _repair(search: _Search, front: Front, pool: list[Route], size: float, chang
             front.offer([front.layouts[k + 1]], size)
 
 
-def _extensions(search: _Search, layout: Layout, size: float, rounds: int) -> list[Layout]:
-    """The solved ``layout`` with one route end carried on straight by ``EXTEND`` x L
-    (:func:`~.routes.extend_route`; each end of each route, kept clear of the
-    walls; an end the walls cut back to less than half that is left out), each
-    solved from ``layout``'s contractions and equilibria and finished (``rounds``;
-    on the search's workers too)."""
+def _extension_jobs(search: _Search, layout: Layout, size: float, rounds: int) -> list[tuple]:
+    """The jobs of :func:`_extended` for the solved ``layout``: its routes with one
+    route end carried on straight by ``EXTEND`` x L (:func:`~.routes.extend_route`;
+    each end of each route, kept clear of the walls; an end the walls cut back to
+    less than half that is left out), each to be solved from ``layout``'s
+    contractions and equilibria and finished (``rounds``)."""
     jobs = []
     for i, route in enumerate(layout.routes):
         for end in (0, 1):
@@ -453,8 +470,20 @@ def _extensions(search: _Search, layout: Layout, size: float, rounds: int) -> li
             if longer is None or longer.length < route.length + 0.5 * EXTEND * size:
                 continue
             jobs.append((layout, layout.routes[:i] + [longer] + layout.routes[i + 1:], rounds))
-    found = search.each(partial(_extended, search), _extension_task, jobs)
-    return [lay for lay in found if lay is not None]
+    return jobs
+
+
+def _extensions(search: _Search, layouts: list[Layout], size: float, rounds: int) -> list[list[Layout]]:
+    """Per layout of ``layouts``, its extensions (:func:`_extension_jobs`) solved and
+    finished - all of them in one batch, on the search's workers too; those that
+    cannot be solved are left out."""
+    jobs = [_extension_jobs(search, lay, size, rounds) for lay in layouts]
+    found = search.each(partial(_extended, search), _extension_task, [job for js in jobs for job in js])
+    out, at = [], 0
+    for js in jobs:
+        out.append([lay for lay in found[at:at + len(js)] if lay is not None])
+        at += len(js)
+    return out
 
 
 def _extended(search: _Search, layout: Layout, routes: list[Route], rounds: int) -> Layout | None:
@@ -482,9 +511,10 @@ def _extend(search: _Search, front: Front, pool: list[Route], size: float, optio
     counts = [k for k in sorted(front.layouts) if k <= min(within) + 1] if within else sorted(front.layouts)[-1:]
     changed = set()
     for k in counts:
-        held = front.layouts[k]
         say(f"front: the {k}-tendon layout with each route end carried on by {EXTEND:g} L")
-        found = _extensions(search, held, size, options.refine)
+    extended = _extensions(search, [front.layouts[k] for k in counts], size, options.refine)
+    for k, found in zip(counts, extended):
+        held = front.layouts[k]
         front.offer(found, size)
         best = min(found, key=lambda lay: lay.cost, default=None)
         if best is not None and best.cost < held.cost:
