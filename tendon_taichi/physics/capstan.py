@@ -135,7 +135,8 @@ class PointMap:
         return np.einsum("pk,pkd->pd", self.bary, v[self.nodes])
 
     def to_nodes(self, q: np.ndarray) -> np.ndarray:
-        return _scatter(self.nodes.ravel(), (self.bary[:, :, None] * q[:, None, :]).reshape(-1, 2), self.n) * self.free
+        spread = (self.bary[:, :, None] * q[:, None, :]).reshape(-1, 2)
+        return _scatter(self.nodes.ravel(), spread, self.n) * self.free
 
 
 class FrictionJacobian:
