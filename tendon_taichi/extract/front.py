@@ -240,9 +240,12 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
         # most; above it, the best, one round - those of every count above at once (they do not
         # depend on each other, and once a count is within the budget one stays within it)
         if within and not ahead:
-            ahead = _finish_ahead(search, {j: _best(by_count[j], 1, size)[0] for j in counts[i:]})
+            rest = counts[i:]
+            say(f"front: optimizing the routes of the best {rest[0]}{f'- to {rest[-1]}' if rest[1:] else ''}"
+                f"-tendon layout{'s' if rest[1:] else ''}")
+            ahead = dict(zip(rest, _finish_all(search, [_best(by_count[j], 1, size)[0] for j in rest], 1)))
         if k in ahead:
-            done = ahead[k]
+            done = [ahead[k]]
         else:
             members = by_count[k]
             say(f"front: optimizing the routes of the {'best' if len(members) == 1 else len(members)} "
@@ -353,16 +356,6 @@ def _finish_task(spec: tuple, job: tuple[Layout, int]) -> tuple[Layout, dict]:
 def _finish_all(search: _Search, layouts: list[Layout], rounds: int) -> list[Layout]:
     """Each of ``layouts`` finished (:func:`_finished`), on the search's workers too."""
     return search.each(partial(_finished, search), _finish_task, [(m, rounds) for m in layouts])
-
-
-def _finish_ahead(search: _Search, best: dict[int, Layout]) -> dict[int, list[Layout]]:
-    """Each count's ``best`` layout finished, one round, all in one batch: per count,
-    a list of the one finished layout."""
-    counts = sorted(best)
-    span = f"{counts[0]}-tendon" if len(counts) == 1 else f"{counts[0]}- to {counts[-1]}-tendon"
-    search.log(f"front: optimizing the routes of the best {span} layout{'s' if len(counts) > 1 else ''}")
-    done = _finish_all(search, [best[k] for k in counts], 1)
-    return {k: [lay] for k, lay in zip(counts, done)}
 
 
 def _pooled(search: _Search, consolidations: list[Consolidation], size: float) -> Layout | None:
@@ -478,12 +471,8 @@ def _extensions(search: _Search, layouts: list[Layout], size: float, rounds: int
     finished - all of them in one batch, on the search's workers too; those that
     cannot be solved are left out."""
     jobs = [_extension_jobs(search, lay, size, rounds) for lay in layouts]
-    found = search.each(partial(_extended, search), _extension_task, [job for js in jobs for job in js])
-    out, at = [], 0
-    for js in jobs:
-        out.append([lay for lay in found[at:at + len(js)] if lay is not None])
-        at += len(js)
-    return out
+    found = iter(search.each(partial(_extended, search), _extension_task, [job for js in jobs for job in js]))
+    return [[lay for lay in [next(found) for _ in js] if lay is not None] for js in jobs]
 
 
 def _extended(search: _Search, layout: Layout, routes: list[Route], rounds: int) -> Layout | None:

@@ -194,14 +194,20 @@ def keep_clear(route: Route, walls: Walls, clearance: float, iterations: int = 4
     if d.min() < clearance:
         route = route.with_control(fit_control(_trim_ends(pts, walls, clearance * (1.0 + 1e-3)),
                                                len(route.control)))
-    B = along_segments(route.basis)
+    parts = 4
+    B = along_segments(route.basis, parts)
     control = route.control.copy()
     for _ in range(iterations):
         pts = B @ control
         d, g = walls.distance_gradient(pts)
         short = d < clearance * (1.0 + 1e-3)
         if not short.any():
-            return route.with_control(control)
+            done = route.with_control(control)
+            if walls.polyline_distance(done.waypoints) >= clearance * (1.0 - 1e-6):
+                return done
+            parts *= 2  # a wall's corner came closer between the points looked at: look at more
+            B = along_segments(route.basis, parts)
+            continue
         # push the short points in by what they lack (and a little more), and refit,
         # holding the pushed ones harder than the others
         target = pts + np.where(short[:, None], g * (clearance * 1.1 - d)[:, None], 0.0)
