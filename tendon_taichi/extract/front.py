@@ -233,7 +233,7 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
         by_count[k] = by_count[k] + [lay for lay in found if _key(lay, size) not in kept]
     counts = [k for k in sorted(by_count) if by_count[k] and (max_tendons is None or k <= max_tendons)]
     within = False
-    ahead: dict[int, list[Layout]] = {}
+    ahead: dict[int, Layout] = {}  # counts above the first within the budget, finished at once
     for i, k in enumerate(counts):
         # up to the first count within the budget, every layout the beam kept (and the exhaustive
         # search found) is finished - route optimization can reorder them: a join often gains

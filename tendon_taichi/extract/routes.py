@@ -205,7 +205,7 @@ def keep_clear(route: Route, walls: Walls, clearance: float, iterations: int = 4
             done = route.with_control(control)
             if walls.polyline_distance(done.waypoints) >= clearance * (1.0 - 1e-6):
                 return done
-            parts *= 2  # a wall's corner came closer between the points looked at: look at more
+            parts = min(2 * parts, 256)  # a wall's corner came closer between the points looked at: more
             B = along_segments(route.basis, parts)
             continue
         # push the short points in by what they lack (and a little more), and refit,
