@@ -165,65 +165,63 @@ def test_routes_do_not_depend_on_the_mesh():
     assert isinstance(a, Route)
 
 
+def _arm_objective():
+    """A one-route objective on t_shape at level 1 (with friction) and its start z0."""
+    p = build_problem(load_scene("t_shape"), 1)
+    t = np.linspace(0, 1, 12)
+    routes = [fit_route(np.stack([0.04 * t, 0.075 - 0.004 * np.sin(np.pi * t)], 1), p.size, 0.4)]
+    obj = RouteObjective(p, routes, p.scene.optimize, RouteSettings(friction=0.3, clearance=0.02 * p.size),
+                         "direct")
+    return p, obj, obj.pack(routes, np.array([[0.08]]))
+
+
+def _as_a_new_robot(p, obj, z, start):
+    """Whether the objective's last evaluation (at ``z``) is bit for bit that of a new
+    robot of the same cables started from the equilibria ``start``; the new robot."""
+    from tendon_taichi.optimizer.soft_ik import SoftIK
+
+    ik = obj.ik
+    fresh = SoftIK(p, p.scene.optimize, "direct", cables=ik.model.cables)
+    fresh.eval_tol = ik.eval_tol
+    for ps, x in zip(fresh.poses, start):
+        ps.model.set_positions(x)
+    f, g = fresh.evaluate(obj.unpack(z)[1].ravel())
+    same = f == ik.last_value() and np.array_equal(g, ik._last[2])
+    return same and all(np.array_equal(u, v) for u, v in zip(ik.adjoints, fresh.adjoints)), fresh
+
+
 def test_a_route_moved_across_triangles_gives_what_a_new_robot_gives():
     """Route optimization keeps its robot when a step moves waypoints into other
     triangles (the cables' incidences, the sparsity pattern and the capstan
     weights are rebuilt in place): the soft IK's objective, gradient and adjoints
     there are bit for bit those of a new robot of the same cables started from
     the same equilibria."""
-    from tendon_taichi.optimizer.soft_ik import SoftIK
-
-    p = build_problem(load_scene("t_shape"), 1)
-    L = p.size
-    t = np.linspace(0, 1, 12)
-    routes = [fit_route(np.stack([0.04 * t, 0.075 - 0.004 * np.sin(np.pi * t)], 1), L, 0.4)]
-    rs = RouteSettings(friction=0.3, clearance=0.02 * L)
-    obj = RouteObjective(p, routes, p.scene.optimize, rs, "direct")
-    z0 = obj.pack(routes, np.array([[0.08]]))
+    p, obj, z0 = _arm_objective()
     obj.evaluate(z0)
     ik, tri0, start = obj.ik, obj.ik.model.cables.points.tri.copy(), [x.copy() for x in obj.positions]
     z1 = z0.copy()
-    z1[1:obj.n_control:2] -= 0.003 / L  # every control point 3 mm down
+    z1[1:obj.n_control:2] -= 0.003 / p.size  # every control point 3 mm down
     obj.evaluate(z1)
     assert obj.ik is ik and not np.array_equal(ik.model.cables.points.tri, tri0)
-    fresh = SoftIK(p, p.scene.optimize, "direct", cables=ik.model.cables)
-    fresh.eval_tol = ik.eval_tol
-    for ps, x in zip(fresh.poses, start):
-        ps.model.set_positions(x)
-    f, g = fresh.evaluate(obj.unpack(z1)[1].ravel())
+    same, fresh = _as_a_new_robot(p, obj, z1, start)
     a, b = ik.poses[0].linear, fresh.poses[0].linear
     assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
-    assert f == ik.last_value() and np.array_equal(g, ik._last[2])
-    assert all(np.array_equal(u, v) for u, v in zip(ik.adjoints, fresh.adjoints))
+    assert same
 
 
 def test_a_route_moved_back_reuses_its_earlier_pattern():
     """A step back into the triangles of an earlier step takes that step's sparsity
     pattern and LDL^T analysis again (no new ones), and the evaluation there is bit
     for bit a new robot's of the same cables from the same equilibria."""
-    from tendon_taichi.optimizer.soft_ik import SoftIK
-
-    p = build_problem(load_scene("t_shape"), 1)
-    L = p.size
-    t = np.linspace(0, 1, 12)
-    routes = [fit_route(np.stack([0.04 * t, 0.075 - 0.004 * np.sin(np.pi * t)], 1), L, 0.4)]
-    rs = RouteSettings(friction=0.3, clearance=0.02 * L)
-    obj = RouteObjective(p, routes, p.scene.optimize, rs, "direct")
-    z0 = obj.pack(routes, np.array([[0.08]]))
+    p, obj, z0 = _arm_objective()
     obj.evaluate(z0)
     linear = obj.ik.poses[0].linear
     first, ldl = linear.pattern, linear.ldl
     z1 = z0.copy()
-    z1[1:obj.n_control:2] -= 0.003 / L
+    z1[1:obj.n_control:2] -= 0.003 / p.size
     obj.evaluate(z1)
     assert linear.pattern is not first
     start = [x.copy() for x in obj.positions]
     obj.evaluate(z0)
     assert linear.pattern is first and linear.ldl is ldl and ldl is not None
-    fresh = SoftIK(p, p.scene.optimize, "direct", cables=obj.ik.model.cables)
-    fresh.eval_tol = obj.ik.eval_tol
-    for ps, x in zip(fresh.poses, start):
-        ps.model.set_positions(x)
-    f, g = fresh.evaluate(obj.unpack(z0)[1].ravel())
-    assert f == obj.ik.last_value() and np.array_equal(g, obj.ik._last[2])
-    assert all(np.array_equal(u, v) for u, v in zip(obj.ik.adjoints, fresh.adjoints))
+    assert _as_a_new_robot(p, obj, z0, start)[0]
