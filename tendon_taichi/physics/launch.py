@@ -129,9 +129,10 @@ def _reader(ret_type, index: tuple):
     from taichi.lang.matrix import VectorType
     from taichi.types import primitive_types
 
-    if any(ret_type is t for t in (ti.i8, ti.i16, ti.i32, ti.i64)):
+    kind = _kind(ret_type)  # a signed integer or a real number, as an argument would be
+    if kind == _INT:
         return lambda ctx: ctx.get_struct_ret_int(index)
-    if id(ret_type) in primitive_types.real_type_ids:
+    if kind == _FLOAT:
         return lambda ctx: ctx.get_struct_ret_float(index)
     if isinstance(ret_type, VectorType) and ret_type.dtype in primitive_types.real_types:
         entries = [index + (j,) for j in range(ret_type.m * ret_type.n)]

@@ -207,9 +207,10 @@ class DirectSolver(LinearSolver):
         rs, cs = np.repeat(self.sdofs, 12, axis=1).ravel(), np.tile(self.sdofs, (1, 12)).ravel()
         keep_s = self.free[rs] & self.free[cs]
         rs, cs = free_index[rs[keep_s]], free_index[cs[keep_s]]
-        elements = self._element_pattern(free_index, nf)
+        tendons = self.ordered and not m.single
+        elements = self._element_pattern(free_index, nf, tendons)
         keep = np.concatenate([elements.keep, keep_s])
-        if self.ordered and not m.single:  # tendons: the elements' ordering (the segments add local couplings)
+        if tendons:  # the elements' ordering (the segments add local couplings)
             order = elements.order
             uniq, pos = _merged(elements, order[cs].astype(np.int64) * nf + order[rs])
         else:
@@ -239,11 +240,12 @@ class DirectSolver(LinearSolver):
             self._build_structure()
         self.reset()
 
-    def _element_pattern(self, free_index: np.ndarray, nf: int) -> _ElementPattern:
+    def _element_pattern(self, free_index: np.ndarray, nf: int, tendons: bool) -> _ElementPattern:
         """The elements' part of the pattern (``free_index``: each DOF's index among
-        the free ones), computed once per mesh and clamp set."""
+        the free ones; ``tendons``: with the elements' fill-reducing ordering),
+        computed once per mesh and clamp set."""
         cache = _ELEMENT_PATTERN.setdefault(self.model.mesh, {})
-        key = (self.free.tobytes(), self.ordered and not self.model.single)
+        key = (self.free.tobytes(), tendons)
         if key not in cache:
             T = self.model.mesh.triangles
             edofs = (2 * T[:, :, None] + np.arange(2)).reshape(-1, 6)  # (m, 6)
@@ -251,7 +253,7 @@ class DirectSolver(LinearSolver):
             keep = self.free[re] & self.free[ce]
             r, c = free_index[re[keep]], free_index[ce[keep]]
             order, keys, pos = None, None, None
-            if key[1]:
+            if tendons:
                 order = _fill_reducing_order(r, c, nf)
                 keys, pos = np.unique(order[c].astype(np.int64) * nf + order[r], return_inverse=True)
             cache[key] = _ElementPattern(keep, r, c, order, keys, pos)
