@@ -98,6 +98,8 @@ def test_make_results_writes_the_results_page(planted_results):
     assert "same count at every level: 1 of 1" in (planted_results / "page" / "counts_by_level.md").read_text()
     assert (planted_results / "page" / "worst_cases.png").read_bytes()[:4] == b"\x89PNG"
     assert f"{case['case']} at level 1" in page and "![the worst results](worst_cases.png)" in page
+    assert "## The front across levels" in page and "![the fronts](fronts.png)" in page
+    assert (planted_results / "page" / "fronts.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_reextract_reproduces_the_run(planted_results, tmp_path):

@@ -75,8 +75,10 @@ def test_design_writes_every_output_and_nothing_else(designed):
     assert [e["count"] for e in summary["front"]] == sorted({e["count"] for e in summary["front"]})
     for e in summary["front"]:
         assert set(e) >= {"count", "realizable_pose_error_rel", "realizable_pose_error_rel_level", "capstan_worst",
-                          "kinks", "total_length", "source", "converged_resolution"}
+                          "kinks", "total_length", "source", "converged_resolution", "routes"}
         assert e["converged_resolution"] == 2  # re-solved on the level-2 mesh
+        assert len(e["routes"]) == e["count"]  # what --routes-from reads back
+        assert all(len(q["control_points"]) >= 2 and len(q["contraction_ratio"]) == 1 for q in e["routes"])
     counts = [e["count"] for e in summary["front"]]
     assert counts == list(range(1, len(counts) + 1))  # every count from 1
     errors = [e["realizable_pose_error_rel_level"] for e in summary["front"]]
@@ -228,3 +230,61 @@ def test_tendon_settings_given_on_the_command_line_reach_the_recording(tmp_path)
     run = optimize(scene.with_tendons(friction=0.0, clearance=0.05), 1, record=tmp_path / "run.rrd")
     ts = read_recording(run.recording).problem().scene.tendons
     assert (ts.friction, ts.clearance) == (0.0, 0.05) and scene.tendons.friction == 0.1
+
+
+def _prior(size, **change):
+    """A design.json of t_shape (body size ``size``) with a one-route front, ``change`` applied."""
+    route = {"control_points": [[0.01, 0.05], [0.02, 0.06], [0.03, 0.07]], "samples": 12, "tension": 0.5,
+             "contraction_ratio": [0.05], "source": "strands"}
+    data = {"scene": "t_shape", "body_size": size, "front": [{"count": 1, "routes": [route]}]}
+    for key, value in change.items():
+        if key in data:
+            data[key] = value
+        else:
+            route[key] = value
+    return json.dumps(data)
+
+
+@pytest.mark.parametrize("text, message", [
+    (None, "--routes-from: no design at 'prior'"),
+    ("not json", "is not a design.json"),
+    ('{"scene": "t_shape"}', "is not a design.json (no 'front' list)"),
+    (dict(scene="finger"), "is a design of scene 'finger', not of 't_shape'"),
+    (dict(body_size=1.0), "is a design of another body"),
+    (dict(front=[{"count": 1}]), "lists no routes with its front"),
+    (dict(contraction_ratio=[0.05, 0.06]), "is a design for 2 pose(s); this scene has 1"),
+    (dict(control_points=[[0.01, "x"]]), "has a malformed route in its front"),
+    (dict(samples=None), "has a malformed route in its front"),
+])
+def test_a_bad_prior_design_gives_one_line_and_writes_nothing(cli, tmp_path, text, message):
+    """``--routes-from`` is checked before anything is computed."""
+    from tendon_taichi import build_problem, load_scene
+
+    if isinstance(text, dict):
+        text = _prior(build_problem(load_scene("t_shape"), 1).size, **text)
+    if text is not None:
+        (tmp_path / "prior").mkdir()
+        (tmp_path / "prior" / "design.json").write_text(text)
+    r = cli("design", "t_shape", "--out", "out", "--routes-from", "prior", cwd=tmp_path)
+    assert r.returncode == 2 and r.stdout == ""
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("tendon-taichi: error: ") and message in lines[0], r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ([] if text is None else ["prior"])
+
+
+def test_a_design_searches_from_a_prior_designs_front(designed, tmp_path):
+    """``--routes-from``: the prior design's front layouts join the seeds (said on
+    stderr, counted in design.json's ``search`` with the file they came from)."""
+    from conftest import run_cli
+
+    d, _ = designed
+    r = run_cli("design", d / "finger.toml", "--out", "again", "--stage-iterations", "25", "--k-min", "0.1",
+                "--extractors", "strands", "path_cover", "--refine", "1", "--routes-from", d / "out", "--no-png",
+                cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    first = json.loads((d / "out" / "design.json").read_text())
+    again = json.loads((tmp_path / "again" / "design.json").read_text())
+    n = len(first["front"])
+    assert f"{n} of the {n} layouts of '{d / 'out' / 'design.json'}' join the front's seeds" in r.stderr
+    assert again["search"]["priors"] == n and again["search"]["routes_from"] == str(d / "out" / "design.json")
+    assert first["search"]["priors"] == 0 and first["search"]["routes_from"] is None

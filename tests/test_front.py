@@ -10,8 +10,8 @@ from test_consolidation import _state, _tendons, straight  # noqa: F401  (the fi
 
 from tendon_taichi.apps.design import front_rows, recommend
 from tendon_taichi.extract.consolidation import consolidate
-from tendon_taichi.extract.front import (converge_front, converged_error, distinct_routes, pose_only_state, same_route,
-                                        search_front)
+from tendon_taichi.extract.converge import converge_front, converged_error, pose_only_state
+from tendon_taichi.extract.front import distinct_routes, same_route, search_front
 from tendon_taichi.extract.settings import ConsolidationSettings
 
 OPTIONS = ConsolidationSettings(tolerance=1e-3, gap=0.1, budget=0.005, refine=0)
@@ -337,3 +337,51 @@ def test_worker_processes_find_the_same_front(searched):
         assert np.array_equal(a.realizable.ratios, b.realizable.ratios)
         assert [lay.cost for lay in alone.finished[k]] == [lay.cost for lay in shared.finished[k]]
         assert alone_fine[k].pose_error_rel == shared_fine[k].pose_error_rel
+
+
+def _prior_file(tmp_path, p, front) -> str:
+    """``front`` as design.json lists it (with its routes), in a file."""
+    import json
+
+    rows = front_rows(front, None, p.scene.tendons.friction, 30.0)
+    path = tmp_path / "design.json"
+    path.write_text(json.dumps({"scene": p.scene.name, "body_size": p.size, "front": rows}))
+    return str(path)
+
+
+def test_a_prior_designs_layouts_read_back_are_the_same_robots(searched, tmp_path):
+    """The front's routes written with design.json and read back
+    (``--routes-from``): the same control points, samples and start ratios, and
+    solved from those ratios the same as-built error."""
+    from tendon_taichi.apps.priors import PRIOR, prior_layouts, read_prior
+    from tendon_taichi.extract.consolidation import _Search, route_settings
+
+    p, st, _, front = searched
+    priors = prior_layouts(read_prior(_prior_file(tmp_path, p, front), p.scene), p)
+    assert [len(q.routes) for q in priors] == sorted(front.layouts)
+    search = _Search(p, st, p.scene.optimize, "direct", OPTIONS, route_settings(p, OPTIONS), "test", None)
+    for q, k in zip(priors, sorted(front.layouts)):
+        lay = front.layouts[k]
+        for a, b in zip(q.routes, lay.routes):
+            assert np.array_equal(a.control, b.control) and a.samples == b.samples and a.tension == b.tension
+            assert a.source == PRIOR + b.source
+        assert np.array_equal(q.ratios, np.atleast_2d(lay.realizable.ratios).reshape(1, -1))
+        again = search.solve(q.routes, q.ratios)
+        assert again.error == pytest.approx(lay.error, abs=1e-6)  # the soft IK's precision, x L
+
+
+def test_a_prior_design_gives_the_front_a_layout_its_lattice_did_not(searched, straight, tmp_path):  # noqa: F811
+    """An extractor that found only the stem tendon: its front has one tendon, not
+    enough. With the two-tendon front as a prior design, the front has two tendons
+    that make the pose, from the prior's routes."""
+    from tendon_taichi.apps.priors import PRIOR, prior_layouts, read_prior
+
+    p, st, _, front = searched
+    stem = [consolidate(p, _tendons(p, [straight[1][1]], st), st, p.scene.optimize, OPTIONS, "direct", source="c")]
+    alone = search_front(p, st, p.scene.optimize, stem, OPTIONS, "direct")
+    assert sorted(alone.layouts) == [1] and alone.layouts[1].error > 0.005 and alone.priors == 0
+    priors = prior_layouts(read_prior(_prior_file(tmp_path, p, front), p.scene), p)
+    helped = search_front(p, st, p.scene.optimize, stem, OPTIONS, "direct", priors=priors)
+    assert helped.priors == len(front.layouts) and helped.seeds == alone.seeds + len(front.layouts)
+    assert helped.layouts[2].error < 1e-3 and PRIOR in helped.layouts[2].source
+    assert helped.as_json()["priors"] == len(front.layouts)

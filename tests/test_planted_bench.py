@@ -191,9 +191,41 @@ def test_levels_compare_the_recommended_count_and_the_fronts():
     assert res["errors_agree"] == 2
     text = table(res)
     assert text[-1] == ("the same recommended count at every level in 2 of 3 cases; the front's errors agree up "
-                        "to planted + 1 tendons in 2 of 3")
+                        "to planted + 1 tendons in 2 of 3; each level searched on its own")
+    assert table({**res, "coarse_to_fine": True})[-1].endswith(
+        "; each level after the first also searched from the one before's designs")
     assert text[2].split()[5:7] == ["no", "differ"] and text[2].split()[7] == "0.800%"
     assert text[1].split()[1:7] == ["2", "2", "2", "2", "yes", "agree"] and text[3].split()[-1] == "0.700%"
     fig = fronts_figure(res)
     assert len(fig.axes[0].get_lines()) == 3 + 2  # a line per level, the planted count and the budget
     assert fig.axes[1].get_title() == "b (count moves)"
+
+
+@pytest.mark.parametrize("coarse_to_fine", [True, False])
+def test_each_level_searches_from_the_level_befores_designs(tmp_path, monkeypatch, coarse_to_fine):
+    """``--levels``: from the coarsest up, each level's cases get the level before's
+    design.json of the same case as their prior design (where one was written);
+    ``--independent-levels``: none."""
+    import tendon_taichi.planted.levels as levels
+    from tendon_taichi.planted.bench import case_folder
+
+    seen = {}
+
+    def fake_suite(directory, level, out_dir, priors=None, **kwargs):
+        seen[level] = priors
+        for c in load_suite(directory)[:2]:  # two cases designed, the rest failed
+            folder = case_folder(Path(out_dir) / "cases", c.name, level)
+            folder.mkdir(parents=True)
+            (folder / "design.json").write_text("{}")
+        return {"cases": [], "totals": {}}
+
+    monkeypatch.setattr(levels, "run_suite", fake_suite)
+    res = levels.run_levels(SUITE, [3, 1, 2], tmp_path, coarse_to_fine=coarse_to_fine)
+    assert list(seen) == [1, 2, 3] and seen[1] is None and res["coarse_to_fine"] == coarse_to_fine
+    if not coarse_to_fine:
+        assert seen[2] is None and seen[3] is None
+        return
+    names = [c.name for c in load_suite(SUITE)[:2]]
+    for lv in (2, 3):
+        assert seen[lv] == {n: tmp_path / f"level{lv - 1}" / "cases" / f"{n}-r{lv - 1}" / "design.json"
+                            for n in names}

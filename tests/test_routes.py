@@ -155,6 +155,31 @@ def test_route_gradient_matches_central_differences():
         assert g[j] == pytest.approx(fd, rel=2e-5, abs=1e-9 * np.abs(g).max()), j
 
 
+def test_a_route_shrunk_to_a_point_is_a_step_too_far():
+    """A trial step that puts every control point of a route on one point (the
+    corner of their bounds) is refused at once - no robot with a tendon of no length
+    is solved (its capstan factor would be 0 / 0) - and route optimization prices it
+    as a failed equilibrium."""
+    import warnings
+
+    from tendon_taichi.errors import ConvergenceError
+    from tendon_taichi.extract.routing import optimize_routes
+
+    p = build_problem(load_scene("t_shape"), 1)
+    t = np.linspace(0, 1, 12)
+    route = fit_route(np.stack([0.004 * np.sin(3 * t), 0.01 + 0.05 * t], 1), p.size, 0.4)
+    rs = RouteSettings(friction=0.1, clearance=0.02 * p.size)
+    obj = RouteObjective(p, [route], p.scene.optimize, rs, "direct")
+    point = route.with_control(np.tile(route.control[3], (len(route.control), 1)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no 0 / 0 on the way
+        with pytest.raises(ConvergenceError, match="shrunk to a point"):
+            obj.evaluate(obj.pack([point], np.array([[0.05]])))
+        assert np.isfinite(obj.evaluate(obj.pack([route], np.array([[0.05]])))[0])
+    res = optimize_routes(p, [point], np.array([[0.05]]), p.scene.optimize, rs, "direct")
+    assert not np.isfinite(res.objective_start) or res.objective_start > 1.0
+
+
 def test_routes_do_not_depend_on_the_mesh():
     """How many waypoints and control points a route has depends on its length and
     the body size, not on the resolution level."""

@@ -2,17 +2,21 @@
 
 Usage: python benchmarks/planted_results/make_results.py [--levels 1 2 3] [--out DIR] [--runs DIR]
        [--workers N] [--cases NAME ...] [--set KEY=VALUE ...] [--beam B] [--no-converge]
+       [--independent-levels]
 
-For each level, runs `tendon-taichi planted-bench benchmarks/planted --resolution
-LEVEL --out RUNS/rLEVEL` (default settings, or the [optimize] settings given by
---set and the front's --beam and --no-converge; finished cases in RUNS are
-reused), then writes into DIR (default: this folder)
-planted_bench_level<LEVEL>.csv, gallery_level<LEVEL>.png, counts_by_level.md
-(benchmarks/planted/counts_by_level.py's table) and worst_cases.png (the three
-worst results over every level run) and README.md,
-the results page: per level the suite's figures, per case its figures at
-every level, and the commit that made them. The default run (levels
-1-3, 16 cases) takes a few hours on 2 cores.
+For each level, from the coarsest up, runs `tendon-taichi planted-bench
+benchmarks/planted --resolution LEVEL --out RUNS/rLEVEL` (default settings, or
+the [optimize] settings given by --set and the front's --beam and
+--no-converge; finished cases in RUNS are reused), each level after the first
+also searching from the level before's designs, as `planted-bench --levels`
+does (not with --independent-levels); then writes into DIR (default: this
+folder) planted_bench_level<LEVEL>.csv, gallery_level<LEVEL>.png,
+counts_by_level.md (benchmarks/planted/counts_by_level.py's table),
+worst_cases.png (the three worst results over every level run), fronts.png
+(per case the front of every level) and README.md, the results page: per
+level the suite's figures, per case its figures at every level, the levels
+compared as `planted-bench --levels` compares them, and the commit that made
+them. The default run (levels 1-3, 16 cases) takes about an hour on 2 cores.
 """
 
 import argparse
@@ -25,6 +29,8 @@ from pathlib import Path
 from tendon_taichi.cli.tendons import add_front_flags, front_settings
 from tendon_taichi.planted.bench import load_suite, route_rule, run_suite
 from tendon_taichi.planted.gallery import gallery_figure
+from tendon_taichi.planted.levels import compare_levels, fronts_figure, prior_designs
+from tendon_taichi.planted.levels import table as levels_table
 from tendon_taichi.version import provenance
 
 HERE = Path(__file__).resolve().parent
@@ -111,7 +117,7 @@ def worst_figure(runs: list[dict], path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
-def page(runs: list[dict]) -> str:
+def page(runs: list[dict], levels: dict) -> str:
     p = runs[0].get("provenance") or provenance()
     settings = runs[0]["settings"] or "the defaults"
     return "\n".join([
@@ -125,7 +131,14 @@ def page(runs: list[dict]) -> str:
         "Misses first, then route-rule misses, then the highest as-built error: "
         + ", ".join(f"{c['case']} at level {lv}" for lv, c in worst(runs)) + ".", "",
         "![the worst results](worst_cases.png)", "",
-        "## The count across levels", "", *counts_by_level.table(runs), ""])
+        "## The count across levels", "", *counts_by_level.table(runs), "",
+        "## The front across levels", "",
+        "Per case, the recommended count at each level and whether the front's mesh-converged errors agree "
+        "across the levels (up to planted + 1 tendons, within 0.1 % of L or 25 %, or the planted tendons' own "
+        "spread plus 0.05 % of L where that is wider; `docs/cli.md`, planted-bench, several levels); "
+        + ("each level after the first also searched from the level before's designs." if levels["coarse_to_fine"]
+           else "each level searched on its own."), "",
+        "```text", *levels_table(levels), "```", "", "![the fronts](fronts.png)", ""])
 
 
 def _setting(item: str):
@@ -145,19 +158,27 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", nargs="+")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="an [optimize] setting")
     add_front_flags(ap)
+    ap.add_argument("--independent-levels", action="store_true",
+                    help="search each level on its own (default: from the level before's designs too)")
     args = ap.parse_args(argv)
     front = front_settings(args)
     overrides = dict(_setting(s) for s in args.set)
     runs = []
-    for level in args.levels:
+    levels = sorted(set(args.levels))
+    for level, before in zip(levels, [None] + levels[:-1]):
         run_dir = args.runs / f"r{level}"
-        runs.append(run_suite(SUITE, level, run_dir, overrides, cases=args.cases, workers=args.workers, front=front))
+        coarser = not args.independent_levels and before is not None
+        priors = prior_designs(SUITE, args.runs / f"r{before}", before) if coarser else None
+        runs.append(run_suite(SUITE, level, run_dir, overrides, cases=args.cases, workers=args.workers, front=front,
+                              priors=priors))
         args.out.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(run_dir / "planted_bench.csv", args.out / f"planted_bench_level{level}.csv")
         shutil.copyfile(run_dir / "gallery.png", args.out / f"gallery_level{level}.png")
     (args.out / "counts_by_level.md").write_text("\n".join(counts_by_level.table(runs)) + "\n")
     worst_figure(runs, args.out / "worst_cases.png")
-    (args.out / "README.md").write_text(page(runs))
+    compared = {**compare_levels({r["level"]: r for r in runs}), "coarse_to_fine": not args.independent_levels}
+    fronts_figure(compared).savefig(args.out / "fronts.png", dpi=90)
+    (args.out / "README.md").write_text(page(runs, compared))
     print(f"wrote {args.out}/", file=sys.stderr)
     return 0
 

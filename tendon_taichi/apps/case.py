@@ -26,15 +26,17 @@ STOP = (Interrupted,)
 
 def run_case(scene: Scene, level: int, out: str | Path, solver: str = "auto",
              extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
-             budget: float = BUDGET, png: bool = False, beam: int = BEAM, converge: bool = True) -> Design:
+             budget: float = BUDGET, png: bool = False, beam: int = BEAM, converge: bool = True,
+             routes_from: str | Path | None = None) -> Design:
     """The design of ``scene`` at ``level`` into the folder ``out`` (``run.rrd``,
     ``run.npz``, ``design.json``, ``design.svg``; the pictures with ``png``), with
     ``extractors`` (default: every installed one), each followed by
     ``consolidation`` (default settings, with ``budget``, if None); ``beam``: the
-    front's beam width; ``converge`` re-solves the front on the next finer mesh."""
+    front's beam width; ``converge`` re-solves the front on the next finer mesh;
+    ``routes_from``: a prior design whose front the front searches from too."""
     return design(scene, level, out, solver, budget, extractors=extractors,
                   consolidation=consolidation or ConsolidationSettings(budget=budget), png=png, beam=beam,
-                  converge=converge)
+                  converge=converge, routes_from=routes_from)
 
 
 def worker_setup(warm: bool = True):

@@ -27,7 +27,8 @@ from ..body.problem import build_problem
 from ..body.scene import Scene
 from ..errors import InputError, TendonError
 from ..extract.consolidation import Layout
-from ..extract.front import Front, converge_front, search_front
+from ..extract.converge import converge_front
+from ..extract.front import Front, search_front
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.realizable import as_built_arrays
 from ..extract.settings import BEAM, BUDGET, ConsolidationSettings
@@ -42,6 +43,7 @@ from ..tasks.pool import Pool
 from ..version import provenance
 from .extract import Extraction, extract, frictionless_error, log_layout
 from .optimize import RunResult, optimize
+from .priors import PriorDesign, prior_layouts, read_prior, route_rows
 
 #: what the output folder holds
 FILES = ("run.rrd", "run.npz", "as_built.npz", "design.json", "design.svg", "design.png", "front.png")
@@ -65,9 +67,10 @@ class Design:
 
 
 def front_rows(front: Front, fine: dict | None, mu: float, kink_angle: float) -> list[dict]:
-    """One entry per count: the front's layout with its figures; its
-    ``realizable_pose_error_rel`` is the one on the finer mesh where ``fine`` holds
-    it (``realizable_pose_error_rel_level`` the design level's)."""
+    """One entry per count: the front's layout with its figures and its ``routes``
+    (:func:`~.priors.route_rows`); its ``realizable_pose_error_rel`` is the one on
+    the finer mesh where ``fine`` holds it (``realizable_pose_error_rel_level`` the
+    design level's)."""
     rows = []
     for k, lay in sorted(front.layouts.items()):
         row = lay.front_entry(mu, kink_angle)
@@ -75,6 +78,7 @@ def front_rows(front: Front, fine: dict | None, mu: float, kink_angle: float) ->
         if fine is not None and fine["results"].get(k) is not None:
             row["realizable_pose_error_rel"] = fine["results"][k].pose_error_rel
             row["converged_resolution"] = fine["resolution"]
+        row["routes"] = route_rows(lay)
         rows.append(row)
     return rows
 
@@ -155,7 +159,7 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
            budget: float = BUDGET, max_tendons: int | None = None, extractors: list[str] | None = None,
            consolidation: ConsolidationSettings | None = None, progress: Progress | None = None,
            plugin_timeout: float | None = None, png: bool = True, beam: int = BEAM,
-           converge: bool = True, workers: int = 0) -> Design:
+           converge: bool = True, workers: int = 0, routes_from: str | Path | None = None) -> Design:
     """The main job (module docstring) on ``scene`` at ``level`` into the folder
     ``out`` (default :func:`default_out`); ``budget`` (fraction of L) both bounds
     consolidation (unless ``consolidation`` says otherwise) and picks the
@@ -164,9 +168,12 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     while the contractions are optimized) share the consolidations and the front's
     solves and route optimizations - the same design, sooner where there are idle
     cores (from a script: under ``if __name__ == "__main__":``, as
-    :mod:`~tendon_taichi.tasks.pool` says)."""
+    :mod:`~tendon_taichi.tasks.pool` says); ``routes_from``, a prior design of the
+    same body (its folder or ``design.json``, checked before anything is computed),
+    whose front's layouts the front searches from too (:mod:`.priors`)."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
+    prior = None if routes_from is None else read_prior(routes_from, scene)
     out = Path(out) if out is not None else default_out(scene, level)
     for name in FILES:
         check_writable(out / name, "output")
@@ -176,7 +183,7 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
                          + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
         run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
         ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
-                                          plugin_timeout, beam, converge, pool)
+                                          plugin_timeout, beam, converge, pool, prior)
     if pool.broken:
         progress.message(f"design: {pool.broken}")
     summary["timing"]["optimize_s"] = run.summary["time_s"]
@@ -190,13 +197,15 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
 def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int | None = None,
                 extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
                 progress: Progress | None = None, plugin_timeout: float | None = None, beam: int = BEAM,
-                converge: bool = True, workers: Pool | None = None) -> tuple[Extraction, Layout, dict]:
+                converge: bool = True, workers: Pool | None = None,
+                prior: PriorDesign | None = None) -> tuple[Extraction, Layout, dict]:
     """Every extractor on a recorded run's last stage, consolidated and routed, the
     count/error front searched from all their routes (:func:`search_front`), each
     front entry solved again on the next finer mesh (``converge``), and the layout
     recommended (:func:`recommend`): the extraction, the layout and the summary
     ``design.json`` holds (no file is written). ``workers`` (a pool of worker
-    processes) share the consolidations and the front's independent pieces."""
+    processes) share the consolidations and the front's independent pieces;
+    ``prior``'s front layouts (:func:`~.priors.read_prior`) join the front's seeds."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     cons = consolidation or ConsolidationSettings(budget=budget)
@@ -213,7 +222,11 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
     if not done:
         raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
     ms = MetricSettings(mu=problem.scene.tendons.friction)
-    front = search_front(problem, ex.state, ex.run.settings, done, cons, solver, max_tendons, beam, log, workers)
+    priors = None if prior is None else prior_layouts(prior, problem)
+    if prior is not None:
+        log(f"{len(priors)} of the {len(prior.layouts)} layouts of '{prior.path}' join the front's seeds")
+    front = search_front(problem, ex.state, ex.run.settings, done, cons, solver, max_tendons, beam, log, workers,
+                         priors)
     if not front.layouts:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)" if max_tendons
                          else "no extractor's tendons make a layout of one tendon or more")
@@ -222,7 +235,7 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
     chosen = recommend(rows, budget, max_tendons)
     layout = front.layouts[chosen["count"]]
     summary = _summary(ex, layout, chosen, rows, budget, max_tendons, ms)
-    summary["search"] = {**front.as_json(), "beam": beam,
+    summary["search"] = {**front.as_json(), "beam": beam, "routes_from": None if prior is None else str(prior.path),
                          "converged_resolution": None if fine is None else fine["resolution"],
                          **({"converge_error": fine["error"]} if fine and fine.get("error") else {})}
     summary["timing"].update(extract_s=extract_s, front_s=front.time_s,

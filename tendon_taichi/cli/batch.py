@@ -92,7 +92,8 @@ def cmd_planted_bench(args) -> int:
         from ..planted.levels import run_levels
         from ..planted.levels import table as levels_table
 
-        result = run_levels(args.suite, sorted(set(args.levels)), args.out, **kwargs)
+        result = run_levels(args.suite, sorted(set(args.levels)), args.out,
+                            coarse_to_fine=not args.independent_levels, **kwargs)
         json_out(args, result)
         if args.json != "-":
             print("\n".join(levels_table(result)))
@@ -180,6 +181,9 @@ def add_commands(sub) -> None:
     level.add_argument("--levels", type=int, nargs="+", metavar="N",
                        help="run at each of these levels (into DIR/level<N>/) and compare: per case the front "
                             "of every level and whether the recommended count is the same")
+    s.add_argument("--independent-levels", action="store_true",
+                   help="with --levels, search each level on its own (default: each level also searches from "
+                        "the coarser level's designs, as design --routes-from does)")
     s.add_argument("--out", default="recordings/planted", metavar="DIR")
     s.add_argument("--cases", nargs="+", metavar="NAME", help="run only these cases")
     s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")

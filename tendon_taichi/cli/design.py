@@ -75,7 +75,8 @@ def cmd_design(args) -> int:
     scene = with_overrides(load_scene(args.scene), optimize_overrides(args)).with_tendons(**tendons)
     result = design(scene, args.resolution, args.out, args.solver, budget, max_tendons, args.extractors, cons,
                     Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png,
-                    workers=default_workers() if args.workers is None else args.workers, **front)
+                    workers=default_workers() if args.workers is None else args.workers,
+                    routes_from=args.routes_from, **front)
     summary = result.summary
     json_out(args, summary)
     if args.json != "-":
@@ -97,6 +98,9 @@ def add_commands(sub) -> None:
     s.add_argument("--max-tendons", type=int, default=None, metavar="K",
                    help="recommend at most K tendons")
     add_front_flags(s)
+    s.add_argument("--routes-from", metavar="DESIGN",
+                   help="also search from a prior design of the same body (its folder or design.json, for "
+                        "example a coarser level's): its front's layouts, solved and optimized on this mesh")
     s.add_argument("--extractors", nargs="+", metavar="NAME", help="default: every installed one")
     s.add_argument("--solver", choices=SOLVER_CHOICES, default="auto", help="linear solver (default auto)")
     add_tendon_flags(s)

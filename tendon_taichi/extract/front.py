@@ -50,10 +50,17 @@ tendons together:
   layouts as extracted, before route optimization moved their routes; a
   finished layout is a better start, and which of the two leads to the best
   smaller layout depends on the lattice. The monotone repair then runs again
-  above each count the descent changed.
+  above each count the descent changed;
+* **prior layouts** (``priors``, :class:`PriorLayout`: ``design --routes-from``,
+  another design's front - a coarser level's): routes are curves in the rest
+  body, not lattice paths, so each such layout is solved on this mesh from its
+  own contractions and joins the layouts of its count beside the beam's (the
+  beam's path is the same with or without them), and its routes join the pool.
+  Which layouts the lattice leads the search to moves with the mesh; a good
+  layout found on a coarser mesh is a start the search here may not reach.
 
 Every layout finished on the way is kept (``Front.finished``): on the design
-mesh several often tie, and :func:`converge_front` lets the finer mesh choose.
+mesh several often tie, and :func:`~.converge.converge_front` lets the finer mesh choose.
 
 The finishes of a count's layouts, the extensions and the solves on the finer
 mesh are independent of each other: a pool of worker processes
@@ -62,7 +69,7 @@ front is the same.
 
 Because a greedy layout of each count is among the seeds, the front is never
 worse than greedy consolidation at any count (in effective error).
-:func:`converge_front` then solves every finished layout of each count on a
+:func:`~.converge.converge_front` then solves every finished layout of each count on a
 finer mesh and keeps the least costly there - the figure reported is that
 mesh's, and a layout that reaches the goals only on the design mesh's lattice
 (many can, at a few tendons) loses to one that reaches them on both; the same
@@ -80,12 +87,10 @@ from typing import Callable
 import numpy as np
 
 from ..body.problem import Problem
-from ..errors import ConvergenceError
 from ..objective.settings import OptimizeSettings
 from ..tasks.pool import Pool
 from .consolidation import Candidate, Consolidation, Layout, _Search, positions, route_settings
 from .protocol import IdealizedState
-from .realizable import RealizableResult, solve_realizable_poses
 from .routes import Route, extend_route, keep_clear, resample
 from .settings import BEAM, ConsolidationSettings
 
@@ -109,14 +114,24 @@ SLACK = 1e-6
 EXTEND = 0.1
 
 
+@dataclass(frozen=True)
+class PriorLayout:
+    """A layout from a prior design for the front to search from: its ``routes`` and the
+    contraction ratios ``ratios`` (P, T) to solve them from."""
+
+    routes: list[Route]
+    ratios: np.ndarray
+
+
 @dataclass
 class Front:
     """The best layout found per tendon count (``layouts``, finished; counts from 1),
-    every layout finished per count (``finished``, which :func:`converge_front`
+    every layout finished per count (``finished``, which :func:`~.converge.converge_front`
     chooses among), and what the search cost: ``seeds`` layouts it started from, ``pool`` distinct
     routes (``routes``), ``evaluations`` layouts solved in full, ``screened``
     candidates screened, ``route_evaluations`` equilibria of route optimization in
-    ``route_s`` seconds, ``time_s`` in all."""
+    ``route_s`` seconds, ``time_s`` in all; ``priors`` of the seeds came from
+    a prior design (:class:`PriorLayout`)."""
 
     layouts: dict[int, Layout] = field(default_factory=dict)
     finished: dict[int, list[Layout]] = field(default_factory=dict)
@@ -128,6 +143,7 @@ class Front:
     route_evaluations: int = 0
     route_s: float = 0.0
     time_s: float = 0.0
+    priors: int = 0
 
     def offer(self, layouts: list[Layout], size: float) -> None:
         """Keep ``layouts`` among the finished of their counts, each distinct one once."""
@@ -137,7 +153,7 @@ class Front:
                 held.append(lay)
 
     def as_json(self) -> dict:
-        return {"counts": sorted(self.layouts), "seeds": self.seeds, "pool": self.pool,
+        return {"counts": sorted(self.layouts), "seeds": self.seeds, "priors": self.priors, "pool": self.pool,
                 "evaluations": self.evaluations, "screened": self.screened,
                 "route_evaluations": self.route_evaluations, "route_s": self.route_s, "time_s": self.time_s}
 
@@ -186,12 +202,14 @@ def _best(layouts: list[Layout], n: int, size: float) -> list[Layout]:
 def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSettings,
                  consolidations: list[Consolidation], options: ConsolidationSettings, solver: str = "auto",
                  max_tendons: int | None = None, beam: int = BEAM,
-                 log: Callable[[str], None] | None = None, workers: Pool | None = None) -> Front:
-    """The front (module docstring) from the extractors' ``consolidations``: per count
-    1 .. the most any seed has (at most ``max_tendons``), the best layout found,
-    finished. With consolidation off (``options.enabled`` false), the seeds as they
-    are, no search. ``workers``, a pool of worker processes, share the independent
-    solves and route optimizations (the same front as without them)."""
+                 log: Callable[[str], None] | None = None, workers: Pool | None = None,
+                 priors: list[PriorLayout] | None = None) -> Front:
+    """The front (module docstring) from the extractors' ``consolidations`` and the
+    ``priors`` (layouts from a prior design): per count 1 .. the most any seed has
+    (at most ``max_tendons``), the best layout found, finished. With consolidation off
+    (``options.enabled`` false), the seeds as they are, no search. ``workers``, a
+    pool of worker processes, share the independent solves and route
+    optimizations (the same front as without them)."""
     t0 = time.perf_counter()
     say = log or (lambda text: None)
     wide = replace(options, gap=max(options.gap, JOIN_GAP))
@@ -204,19 +222,26 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
         for lay in c.front.values():
             if lay.count:  # the bare body is no design
                 by_count.setdefault(lay.count, []).append(lay)
+    prior = _solved_priors(search, priors or [], max_tendons)
     pool = distinct_routes([r for c in consolidations for r in c.layout.routes]
-                           + [r for c in consolidations for lay in c.front.values() for r in lay.routes], size)
+                           + [r for c in consolidations for lay in c.front.values() for r in lay.routes]
+                           + [r for lay in prior for r in lay.routes], size)
     pooled = _pooled(search, consolidations, size)
     if pooled is not None:
         by_count.setdefault(pooled.count, []).append(pooled)
-    front = Front(seeds=sum(len(v) for v in by_count.values()), pool=len(pool), routes=pool)
+    front = Front(seeds=sum(len(v) for v in by_count.values()) + len(prior), pool=len(pool), routes=pool,
+                  priors=len(prior))
+    if not options.enabled:
+        for lay in prior:
+            by_count.setdefault(lay.count, []).append(lay)
     if not by_count or not options.enabled:  # nothing to search, or the fitted routes as they are
         front.layouts = {k: _best(v, 1, size)[0] for k, v in sorted(by_count.items())
                          if max_tendons is None or k <= max_tendons}
         front.time_s = time.perf_counter() - t0
         return front
     top = max(by_count)
-    say(f"front: beam search from {top} tendon(s), {front.seeds} seed layouts, {len(pool)} distinct routes")
+    say(f"front: beam search from {top} tendon(s), {front.seeds} seed layouts"
+        + (f" ({len(prior)} from a prior design)" if prior else "") + f", {len(pool)} distinct routes")
     exhaustive: dict[int, list[Layout]] = {}
     for k in range(top, 0, -1):
         by_count[k] = _best(by_count.get(k, []), beam, size)
@@ -228,9 +253,9 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
         for lay in by_count[k]:
             reduced = [replace(r, source=sources(r.routes)) for _, r in search.ranked(search.reductions(lay), lay)]
             by_count.setdefault(k - 1, []).extend(reduced[:beam])
-    for k, found in exhaustive.items():  # beside the beam's layouts, never in their place
-        kept = {_key(lay, size) for lay in by_count[k]}
-        by_count[k] = by_count[k] + [lay for lay in found if _key(lay, size) not in kept]
+    for k, found in [*exhaustive.items(), *((lay.count, [lay]) for lay in prior)]:  # beside the beam's
+        kept = {_key(lay, size) for lay in by_count.get(k, [])}
+        by_count[k] = by_count.get(k, []) + [lay for lay in found if _key(lay, size) not in kept]
     counts = [k for k in sorted(by_count) if by_count[k] and (max_tendons is None or k <= max_tendons)]
     within = False
     ahead: dict[int, Layout] = {}  # counts above the first within the budget, finished at once
@@ -375,6 +400,18 @@ def _pooled(search: _Search, consolidations: list[Consolidation], size: float) -
     return None if lay is None else replace(lay, source=sources(routes))
 
 
+def _solved_priors(search: _Search, priors: list[PriorLayout], max_tendons: int | None) -> list[Layout]:
+    """The ``priors`` of at most ``max_tendons`` routes solved on the search's mesh from
+    their own contractions; those that cannot be solved are left out."""
+    out = []
+    for prior in priors:
+        if max_tendons is None or len(prior.routes) <= max_tendons:
+            lay = search.solve(prior.routes, np.atleast_2d(prior.ratios).reshape(search.problem.n_poses, -1))
+            if lay is not None:
+                out.append(replace(lay, source=sources(prior.routes)))
+    return out
+
+
 def _taut_ratios(search: _Search, route: Route, below: Layout) -> np.ndarray:
     """Contractions (P, 1) that leave ``route`` barely taut in each pose of the
     solved layout ``below`` (strain ``TAUT`` x eps at its equilibria)."""
@@ -512,88 +549,3 @@ def _extend(search: _Search, front: Front, pool: list[Route], size: float, optio
             front.layouts[k] = best
             changed.add(k)
     _repair(search, front, pool, size, changed)
-
-
-def pose_only_state(problem: Problem) -> IdealizedState:
-    """An idealized state that gives only ``problem``'s poses (no tensions, the rest
-    shape): what a layout's as-built robot needs when its contractions are given."""
-    f = problem.fibers.n_fibers
-    one = IdealizedState(np.zeros(f), np.zeros(f), None, 0.0)
-    return replace(one, poses=[one] * problem.n_poses) if problem.n_poses > 1 else one
-
-
-def converged_error(fine: Problem, layout: Layout, state: IdealizedState, settings: OptimizeSettings,
-                    solver: str = "auto", start=None) -> RealizableResult:
-    """A layout's as-built robot on a finer mesh of the same body (``fine``; ``state``
-    from :func:`pose_only_state`): its routes, which do not depend on the mesh,
-    embedded in that mesh and their contractions solved again, from ``start`` (P, T)
-    or else the layout's own."""
-    start = np.atleast_2d(layout.realizable.ratios if start is None else start).reshape(fine.n_poses, -1)
-    return solve_realizable_poses(fine, layout.tendons(), state, settings, solver, start)
-
-
-def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: Problem, settings: OptimizeSettings,
-                   options: ConsolidationSettings, solver: str = "auto", log: Callable[[str], None] | None = None,
-                   workers: Pool | None = None) -> dict[int, RealizableResult | None]:
-    """Each count's layouts on the finer mesh ``fine`` (:func:`converged_error`; None
-    where none can be solved), in place: of the layout held and every other one
-    finished for that count (``front.finished``), the least costly there (its pose
-    error there squared plus its routes' shape cost; the one held on ties) becomes
-    the count's. The front is then kept monotone there: where a count's error is
-    above the count below's by more than ``PRECISION``, that smaller layout with
-    one more pooled route (the best on ``problem``'s mesh from each start,
-    :func:`_with_one_more`, where that keeps the front on ``problem``'s mesh
-    monotone) is solved on ``fine`` as well and replaces the front's layout when it
-    does better there. ``workers`` share the solves of the finished layouts."""
-    fine_state = pose_only_state(fine)
-    search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
-    search.out = Consolidation(next(iter(front.layouts.values())), 0, 0.0)
-    search.workers = workers
-    size = problem.size
-    out: dict[int, RealizableResult | None] = {}
-    spec = (fine, fine_state, settings, solver)
-    choices = {}
-    for k in sorted(front.layouts):
-        key = _key(front.layouts[k], size)
-        choices[k] = [front.layouts[k]] + [m for m in front.finished.get(k, []) if _key(m, size) != key]
-    jobs = [(lay, None) for k in sorted(choices) for lay in choices[k]]
-    if len(jobs) > len(choices):
-        search.log(f"front: the {len(jobs)} finished layouts on the finer mesh")
-    task = partial(_fine_task, spec)
-    found = workers.map(task, jobs) if workers is not None else [task(job) for job in jobs]
-    solved = {id(lay): res for (lay, _), res in zip(jobs, found)}
-    for k in sorted(front.layouts):
-        held, others = choices[k][0], choices[k][1:]
-        res = solved[id(held)]
-        best = np.inf if res is None else search.cost(held.routes, res.pose_error_rel)
-        for lay in others:
-            there = solved[id(lay)]
-            cost = np.inf if there is None else search.cost(lay.routes, there.pose_error_rel)
-            if cost < best - PRECISION ** 2:
-                front.layouts[k], res, best = lay, there, cost
-        below = out.get(k - 1)
-        if below is not None and (res is None or res.pose_error_rel > below.pose_error_rel + PRECISION):
-            smaller = front.layouts[k - 1]
-            for lay in [m for m in _with_one_more(search, smaller, front.routes, size)
-                        if m.error <= max(smaller.error, front.layouts[k].error) + PRECISION]:
-                start = np.concatenate([np.atleast_2d(below.ratios).reshape(fine.n_poses, -1),
-                                        np.atleast_2d(lay.realizable.ratios).reshape(fine.n_poses, -1)[:, -1:]],
-                                       axis=1)
-                more = task((lay, start))
-                if more is not None and (res is None or more.pose_error_rel < res.pose_error_rel):
-                    front.layouts[k], res = lay, more
-        out[k] = res
-    front.evaluations += search.out.evaluations
-    front.screened += search.out.screened
-    return out
-
-
-def _fine_task(spec: tuple, job: tuple[Layout, np.ndarray | None]) -> RealizableResult | None:
-    """:func:`converged_error` (``spec``: the finer problem, its pose-only state, the
-    settings and the solver; ``job``: the layout and where to start), None where
-    it cannot be solved."""
-    fine, fine_state, settings, solver = spec
-    try:
-        return converged_error(fine, job[0], fine_state, settings, solver, job[1])
-    except ConvergenceError:
-        return None

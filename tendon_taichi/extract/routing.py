@@ -55,6 +55,9 @@ BEND_WEIGHT = 1.0e-2
 MAX_TURNING = np.pi / 2
 #: smoothing of |theta| in the friction cost (rad): sqrt(theta^2 + d^2) - d
 TURN_SMOOTHING = 1.0e-3
+#: a route shorter than this (x L) has shrunk to a point (a trial step that put its control
+#: points on one corner of their bounds): a tendon of no length, whose robot is not solved
+COLLAPSED = 1e-9
 #: route optimization keeps each contraction within this fraction of the scene's max_contraction:
 #: routes shaped to need the whole stroke on one mesh have none left on a finer one (or on the bench)
 STROKE = 0.9
@@ -207,8 +210,11 @@ class RouteObjective:
         return ik
 
     def evaluate(self, z: np.ndarray) -> tuple[float, np.ndarray]:
-        """O and dO/dz at z; raises ConvergenceError when an equilibrium fails."""
+        """O and dO/dz at z; raises ConvergenceError when an equilibrium fails or a
+        route has shrunk to a point (``COLLAPSED``)."""
         routes, ratios = self.unpack(z)
+        if min(r.length for r in routes) <= COLLAPSED * self.L:
+            raise ConvergenceError("a route has shrunk to a point")
         ik = self.soft_ik(routes)
         f, g_r = ik.evaluate(ratios.ravel())
         self.positions = [ps.model.positions() for ps in ik.poses]

@@ -133,12 +133,13 @@ def planted_figures(problem: Problem, layout: dict, solver: str = "auto") -> dic
 def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Path,
              overrides: dict | None = None, extractors: list[str] | None = None,
              solver: str = "auto", consolidation: dict | None = None, tendons: dict | None = None,
-             front: dict | None = None) -> dict:
+             front: dict | None = None, routes_from: str | None = None) -> dict:
     """Design one planted case (``consolidation``: the fields of
     :class:`~tendon_taichi.extract.consolidation.ConsolidationSettings`; ``tendons``:
     [tendons] settings to replace; ``front``: ``beam`` and ``converge`` of the
-    count/error front, default if absent); its files go to ``out_dir/NAME-rLEVEL/``.
-    Returns the case's figures."""
+    count/error front, default if absent; ``routes_from``: a prior design whose
+    front the front searches from too); its files go to ``out_dir/NAME-rLEVEL/``
+    (:func:`case_folder`). Returns the case's figures."""
     t0 = time.perf_counter()
     scene = load_scene(str(scene_path))
     if overrides:
@@ -146,9 +147,10 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
     scene = scene.with_tendons(**(tendons or {}))
     case = Case(Path(scene_path).stem, Path(scene_path), layout)
     name, planted_count, planted_length = case.name, case.planted_count, case.planted_length
-    folder = Path(out_dir) / f"{file_stem(name)}-r{level}"
+    folder = case_folder(out_dir, name, level)
     cons = ConsolidationSettings(**(consolidation or {}))
-    d = run_one(scene, level, folder, solver, extractors, cons, budget=cons.budget or 0.005, **(front or {}))
+    d = run_one(scene, level, folder, solver, extractors, cons, budget=cons.budget or 0.005, routes_from=routes_from,
+                **(front or {}))
     run, summary = d.run, d.summary
     final = run.summary["final"]
     length_ratio = final["active_length"] / planted_length if planted_length > 0 else float("inf")
@@ -159,7 +161,20 @@ def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Pa
             "stages": len(run.stages), **planted_figures(d.extraction.problem, layout, solver),
             **score_design(summary, planted_count, length_ratio),
             "optimize_s": summary["timing"]["optimize_s"], "time_s": time.perf_counter() - t0,
-            "recording": str(folder / "run.rrd")}
+            "recording": str(folder / "run.rrd"), "routes_from": routes_from}
+
+
+def case_folder(out_dir: str | Path, name: str, level: int) -> Path:
+    """Where :func:`run_case` writes a case's design: ``out_dir/NAME-rLEVEL/``."""
+    return Path(out_dir) / f"{file_stem(name)}-r{level}"
+
+
+def _prior_id(path: Path | None) -> list | None:
+    """What a case's task id holds of its prior design: its front's routes (a
+    prior that changed makes the case run again)."""
+    if path is None:
+        return None
+    return [e.get("routes") for e in json.loads(path.read_text()).get("front", [])]
 
 
 def score_design(summary: dict, planted_count: int, length_ratio: float) -> dict:
@@ -242,14 +257,17 @@ def _describe(row: dict) -> str:
 def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides: dict | None = None,
               extractors: list[str] | None = None, solver: str = "auto", cases: list[str] | None = None,
               progress=None, workers: int | None = None, scheduler: str | None = None,
-              consolidation=None, tendons: dict | None = None, front: dict | None = None) -> dict:
+              consolidation=None, tendons: dict | None = None, front: dict | None = None,
+              priors: dict[str, Path] | None = None) -> dict:
     """Run every case of a suite (or the named ``cases``) as tasks of
     :func:`tendon_taichi.tasks.engine.run_tasks` (``workers``: local Dask cluster size,
     None: one per core, 0: in this process; ``scheduler``: an existing cluster).
     ``consolidation`` (:class:`~tendon_taichi.extract.consolidation.ConsolidationSettings`,
     default settings if None) follows every extractor; ``front``: ``beam`` and
-    ``converge`` of the count/error front (the defaults of ``design`` if absent).
-    Outputs are rewritten after each case, and a re-run reuses the finished ones
+    ``converge`` of the count/error front (the defaults of ``design`` if absent);
+    ``priors``: per case name, a prior design (``design.json``) whose front that
+    case's front searches from too (``design --routes-from``). Outputs are
+    rewritten after each case, and a re-run reuses the finished ones
     (``out_dir/cases/<id>/result.json``), so an interrupted run keeps what it did."""
     suite = load_suite(directory)
     if cases:
@@ -265,12 +283,14 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
     cons = dataclasses.asdict(consolidation or ConsolidationSettings())
     search = {**FRONT_DEFAULTS, **(front or {})}
     out_dir = Path(out_dir)
+    priors = priors or {}
     tasks = [Task(case_id({"kind": "planted-design", "scene": case.scene_path.read_text(), "layout": case.layout,
                            "level": level, "settings": overrides, "extractors": names, "solver": solver,
-                           "consolidation": cons, "tendons": tendons, **front_id(search)}),
+                           "consolidation": cons, "tendons": tendons, **front_id(search),
+                           **({"routes_from": _prior_id(priors[case.name])} if case.name in priors else {})}),
                   case.name, run_case,
                   (str(case.scene_path), case.layout, level, str(out_dir / "cases"), overrides, names, solver,
-                   cons, tendons, search))
+                   cons, tendons, search, str(priors[case.name]) if case.name in priors else None))
              for case in suite]
     by_name = {c.name: c for c in suite}
     result = {"suite": str(directory), "level": level, "settings": overrides, "consolidation": cons,

@@ -12,6 +12,14 @@ contractions re-solved at each level against the same goals, has a spread
 across the levels; where that spread is larger than the window, the window
 is that spread plus ``AGREE_SLACK`` (0.05 % of L).
 
+**Coarse to fine.** Routes are curves in the rest body, so by default each
+level after the first also searches from the coarser level's front: each
+case's design there is its prior design (``design --routes-from``), whose
+layouts join the seeds of its front. Which layouts the lattice leads a
+search to moves with the mesh, and a layout found on a coarser mesh is a
+start the finer one's search may not reach. ``coarse_to_fine=False`` searches
+each level on its own.
+
 Each level runs as :func:`~tendon_taichi.planted.bench.run_suite` into
 ``OUT/level<N>/``; ``OUT/levels.json`` holds the comparison and
 ``OUT/fronts.png`` one panel per case, one front line per level."""
@@ -22,7 +30,7 @@ from pathlib import Path
 
 from ..files import write_json
 from ..io.plots import new_figure, save_png
-from .bench import run_suite
+from .bench import case_folder, load_suite, run_suite
 
 #: the front's errors at several levels agree within this (x L) ...
 AGREE_ABS = 1e-3
@@ -32,16 +40,31 @@ AGREE_REL = 0.25
 AGREE_SLACK = 5e-4
 
 
-def run_levels(directory: str | Path, levels: list[int], out_dir: str | Path, **kwargs) -> dict:
-    """The suite at each of ``levels`` (``kwargs`` as for ``run_suite``), then the
-    comparison (:func:`compare_levels`), written to ``out_dir/levels.json`` and
+def run_levels(directory: str | Path, levels: list[int], out_dir: str | Path, coarse_to_fine: bool = True,
+               **kwargs) -> dict:
+    """The suite at each of ``levels`` (``kwargs`` as for ``run_suite``), from the
+    coarsest up, each after the first searching from the one before's designs too
+    (``coarse_to_fine``, module docstring); then the comparison
+    (:func:`compare_levels`), written to ``out_dir/levels.json`` and
     ``out_dir/fronts.png``."""
     out_dir = Path(out_dir)
-    runs = {lv: run_suite(directory, lv, out_dir / f"level{lv}", **kwargs) for lv in levels}
-    result = compare_levels(runs)
+    runs: dict[int, dict] = {}
+    order = sorted(levels)
+    for lv, before in zip(order, [None] + order[:-1]):
+        priors = prior_designs(directory, out_dir / f"level{before}", before) if coarse_to_fine and before else None
+        runs[lv] = run_suite(directory, lv, out_dir / f"level{lv}", priors=priors, **kwargs)
+    result = {**compare_levels(runs), "coarse_to_fine": coarse_to_fine}
     write_json(result, out_dir / "levels.json")
     save_png(fronts_figure(result), out_dir / "fronts.png", 90)
     return result
+
+
+def prior_designs(directory: str | Path, level_dir: str | Path, level: int) -> dict[str, Path]:
+    """Per case of the suite in ``directory``, its design at ``level`` (``design.json``,
+    as :func:`~.bench.run_suite` into ``level_dir`` wrote it), where one was written."""
+    found = {c.name: case_folder(Path(level_dir) / "cases", c.name, level) / "design.json"
+             for c in load_suite(directory)}
+    return {name: path for name, path in found.items() if path.is_file()}
 
 
 def compare_levels(runs: dict[int, dict]) -> dict:
@@ -112,7 +135,9 @@ def table(result: dict) -> list[str]:
                    + f"  {widest:>13}  {planted:>14}")
     n = len(result["cases"])
     out.append(f"the same recommended count at every level in {result['same_count']} of {n} cases; the front's "
-               f"errors agree up to planted + 1 tendons in {result['errors_agree']} of {n}")
+               f"errors agree up to planted + 1 tendons in {result['errors_agree']} of {n}"
+               + ("; each level after the first also searched from the one before's designs"
+                  if result.get("coarse_to_fine") else "; each level searched on its own"))
     return out
 
 

@@ -1,0 +1,122 @@
+"""``design --routes-from``: a prior design's front as starting points.
+
+``design.json`` lists with each front entry its ``routes`` (:func:`route_rows`:
+control points, waypoint count, the strand tension the route started from, and
+per pose its contraction ratio). Routes are curves in the rest body, not paths
+on a lattice, so a prior design of the same body - at a coarser level, or an
+earlier run - gives layouts this design's front can start from
+(:class:`~tendon_taichi.extract.front.PriorLayout`): each is solved on this
+mesh from those ratios, and its routes are optimized here like any other.
+Which layouts the lattice leads a search to moves with the mesh; a layout
+found on a coarser mesh is a start the search on a finer one may not reach.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..body.problem import Problem
+from ..body.scene import Scene
+from ..errors import InputError
+from ..extract.consolidation import Layout
+from ..extract.front import PriorLayout
+from ..extract.routes import Route, keep_clear
+
+#: what a route from a prior design is marked with in ``source`` (its extractor's name follows)
+PRIOR = "prior:"
+#: the body sizes of two designs of the same body agree to this (relative)
+SAME_SIZE = 1e-6
+
+
+def route_rows(layout: Layout) -> list[dict]:
+    """A solved layout's routes as ``design.json`` lists them with a front entry:
+    ``control_points`` (c, 2) m, ``samples`` (waypoints), ``tension`` (N, the strand's
+    it started from), ``contraction_ratio`` (one per pose) and ``source``."""
+    ratios = np.atleast_2d(layout.realizable.ratios).reshape(-1, layout.count)  # (P, T)
+    return [{"control_points": r.control.tolist(), "samples": r.samples, "tension": r.tension,
+             "contraction_ratio": ratios[:, i].tolist(), "source": r.source}
+            for i, r in enumerate(layout.routes)]
+
+
+@dataclass(frozen=True)
+class PriorDesign:
+    """A prior design's front as read from its ``design.json`` (``path``): per
+    front entry the rows of its routes (:func:`route_rows`)."""
+
+    path: Path
+    resolution: int | None
+    layouts: list[list[dict]]
+
+
+def read_prior(path: str | Path, scene: Scene) -> PriorDesign:
+    """The front of the design at ``path`` (its folder or its ``design.json``),
+    checked to be one of ``scene``'s body with as many poses; one clear line
+    (:class:`InputError`) when it is not."""
+    p = Path(path)
+    p = p / "design.json" if p.is_dir() else p
+    where = f"--routes-from: '{p}'"
+    if not p.is_file():
+        raise InputError(f"--routes-from: no design at '{path}' (a design folder or its design.json)")
+    try:
+        data = json.loads(p.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{where} is not a design.json ({exc})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("front"), list):
+        raise InputError(f"{where} is not a design.json (no 'front' list)")
+    if data.get("scene") != scene.name:
+        raise InputError(f"{where} is a design of scene '{data.get('scene')}', not of '{scene.name}'")
+    size = _outline_size(scene)
+    theirs = data.get("body_size")
+    if size is not None and (not isinstance(theirs, (int, float)) or abs(theirs - size) > SAME_SIZE * size):
+        raise InputError(f"{where} is a design of another body (its size {theirs!r} m, this one {size:.6g} m)")
+    layouts = [e.get("routes") for e in data["front"] if isinstance(e, dict)]
+    if not any(layouts):
+        raise InputError(f"{where} lists no routes with its front (written before design.json held them: "
+                         "run that design again)")
+    poses = len(scene.poses)
+    for routes in filter(None, layouts):
+        for r in routes:
+            try:
+                control = np.asarray(r["control_points"], dtype=float)
+                ratios = np.asarray(r["contraction_ratio"], dtype=float)
+                ok = (control.ndim == 2 and control.shape[1] == 2 and len(control) >= 2 and int(r["samples"]) >= 2
+                      and np.isfinite(control).all() and np.isfinite(ratios).all()
+                      and np.isfinite(float(r["tension"])))
+            except (TypeError, KeyError, ValueError):
+                ok = False
+            if not ok:
+                raise InputError(f"{where} has a malformed route in its front")
+            if len(ratios) != poses:
+                raise InputError(f"{where} is a design for {len(ratios)} pose(s); this scene has {poses}")
+    return PriorDesign(p, data.get("resolution"), [routes for routes in layouts if routes])
+
+
+def _outline_size(scene: Scene) -> float | None:
+    """The body size L (bounding-box diagonal, m) from the scene's outline; None
+    for a body given as a mesh file (its size is known once it is read)."""
+    outline = scene.body.outline
+    if outline is None:
+        return None
+    return float(np.linalg.norm(outline.max(axis=0) - outline.min(axis=0)))
+
+
+def prior_layouts(prior: PriorDesign, problem: Problem) -> list[PriorLayout]:
+    """The prior design's layouts for ``problem``'s front: each route kept clear of
+    this body's walls at its clearance (a layout with a route that cannot be is
+    left out), marked ``prior:`` in its ``source``."""
+    clearance = problem.scene.tendons.clearance * problem.size
+    out = []
+    for rows in prior.layouts:
+        routes = []
+        for r in rows:
+            source = str(r.get("source") or "front")
+            route = Route(np.asarray(r["control_points"], dtype=float), int(r["samples"]), float(r["tension"]),
+                          source=source if source.startswith(PRIOR) else PRIOR + source)
+            routes.append(keep_clear(route, problem.walls, clearance))
+        if all(r is not None for r in routes):
+            out.append(PriorLayout(routes, np.array([r["contraction_ratio"] for r in rows], dtype=float).T))
+    return out
