@@ -14,11 +14,12 @@ found on a coarser mesh is a start the search on a finer one may not reach.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from ..body.geometry import bbox_diagonal
 from ..body.problem import Problem
 from ..body.scene import Scene
 from ..errors import InputError
@@ -45,11 +46,11 @@ def route_rows(layout: Layout) -> list[dict]:
 @dataclass(frozen=True)
 class PriorDesign:
     """A prior design's front as read from its ``design.json`` (``path``): per
-    front entry the rows of its routes (:func:`route_rows`)."""
+    front entry with routes, that layout (its routes marked ``prior:``, not yet
+    checked against a mesh's walls)."""
 
     path: Path
-    resolution: int | None
-    layouts: list[list[dict]]
+    layouts: list[PriorLayout]
 
 
 def read_prior(path: str | Path, scene: Scene) -> PriorDesign:
@@ -69,54 +70,49 @@ def read_prior(path: str | Path, scene: Scene) -> PriorDesign:
         raise InputError(f"{where} is not a design.json (no 'front' list)")
     if data.get("scene") != scene.name:
         raise InputError(f"{where} is a design of scene '{data.get('scene')}', not of '{scene.name}'")
-    size = _outline_size(scene)
+    size = None if scene.body.outline is None else bbox_diagonal(scene.body.outline)  # a mesh file: not read yet
     theirs = data.get("body_size")
     if size is not None and (not isinstance(theirs, (int, float)) or abs(theirs - size) > SAME_SIZE * size):
         raise InputError(f"{where} is a design of another body (its size {theirs!r} m, this one {size:.6g} m)")
-    layouts = [e.get("routes") for e in data["front"] if isinstance(e, dict)]
-    if not any(layouts):
+    rows = [e.get("routes") for e in data["front"] if isinstance(e, dict) and e.get("routes")]
+    if not rows:
         raise InputError(f"{where} lists no routes with its front (written before design.json held them: "
                          "run that design again)")
-    poses = len(scene.poses)
-    for routes in filter(None, layouts):
-        for r in routes:
-            try:
-                control = np.asarray(r["control_points"], dtype=float)
-                ratios = np.asarray(r["contraction_ratio"], dtype=float)
-                ok = (control.ndim == 2 and control.shape[1] == 2 and len(control) >= 2 and int(r["samples"]) >= 2
-                      and np.isfinite(control).all() and np.isfinite(ratios).all()
-                      and np.isfinite(float(r["tension"])))
-            except (TypeError, KeyError, ValueError):
-                ok = False
-            if not ok:
-                raise InputError(f"{where} has a malformed route in its front")
-            if len(ratios) != poses:
-                raise InputError(f"{where} is a design for {len(ratios)} pose(s); this scene has {poses}")
-    return PriorDesign(p, data.get("resolution"), [routes for routes in layouts if routes])
+    layouts = [_layout(routes, len(scene.poses), where) for routes in rows]
+    return PriorDesign(p, layouts)
 
 
-def _outline_size(scene: Scene) -> float | None:
-    """The body size L (bounding-box diagonal, m) from the scene's outline; None
-    for a body given as a mesh file (its size is known once it is read)."""
-    outline = scene.body.outline
-    if outline is None:
-        return None
-    return float(np.linalg.norm(outline.max(axis=0) - outline.min(axis=0)))
+def _layout(rows: list, poses: int, where: str) -> PriorLayout:
+    """One front entry's ``routes`` (:func:`route_rows`) as a layout to start from."""
+    routes, ratios = [], []
+    for r in rows:
+        try:
+            control = np.asarray(r["control_points"], dtype=float)
+            ratio = np.asarray(r["contraction_ratio"], dtype=float)
+            samples, tension = int(r["samples"]), float(r["tension"])
+            ok = (control.ndim == 2 and control.shape[1] == 2 and len(control) >= 2 and samples >= 2
+                  and ratio.ndim == 1 and np.isfinite(control).all() and np.isfinite(ratio).all()
+                  and np.isfinite(tension))
+        except (TypeError, KeyError, ValueError):
+            ok = False
+        if not ok:
+            raise InputError(f"{where} has a malformed route in its front")
+        if len(ratio) != poses:
+            raise InputError(f"{where} is a design for {len(ratio)} pose(s); this scene has {poses}")
+        source = str(r.get("source") or "front")
+        routes.append(Route(control, samples, tension, source=source if source.startswith(PRIOR) else PRIOR + source))
+        ratios.append(ratio)
+    return PriorLayout(routes, np.array(ratios).T)
 
 
 def prior_layouts(prior: PriorDesign, problem: Problem) -> list[PriorLayout]:
-    """The prior design's layouts for ``problem``'s front: each route kept clear of
+    """The prior design's layouts for ``problem``'s front, each route kept clear of
     this body's walls at its clearance (a layout with a route that cannot be is
-    left out), marked ``prior:`` in its ``source``."""
+    left out)."""
     clearance = problem.scene.tendons.clearance * problem.size
     out = []
-    for rows in prior.layouts:
-        routes = []
-        for r in rows:
-            source = str(r.get("source") or "front")
-            route = Route(np.asarray(r["control_points"], dtype=float), int(r["samples"]), float(r["tension"]),
-                          source=source if source.startswith(PRIOR) else PRIOR + source)
-            routes.append(keep_clear(route, problem.walls, clearance))
+    for lay in prior.layouts:
+        routes = [keep_clear(r, problem.walls, clearance) for r in lay.routes]
         if all(r is not None for r in routes):
-            out.append(PriorLayout(routes, np.array([r["contraction_ratio"] for r in rows], dtype=float).T))
+            out.append(replace(lay, routes=routes))
     return out

@@ -8,6 +8,12 @@ import numpy as np
 import shapely
 
 
+def bbox_diagonal(points: np.ndarray) -> float:
+    """The diagonal of the bounding box of ``points`` (k, 2), m: the body size L
+    when they are a body's."""
+    return float(np.linalg.norm(np.ptp(points, axis=0)))
+
+
 def signed_area(poly: np.ndarray) -> float:
     """Shoelace area of a closed polygon (k, 2); positive when counter-clockwise."""
     x, y = poly[:, 0], poly[:, 1]

@@ -18,6 +18,7 @@ import triangle as tr
 from scipy.spatial import cKDTree
 
 from ..errors import SceneError
+from .geometry import bbox_diagonal
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,7 @@ class Mesh:
     @cached_property
     def size(self) -> float:
         """The body size L: the diagonal of the bounding box, m."""
-        return float(np.linalg.norm(np.ptp(self.nodes, axis=0)))
+        return bbox_diagonal(self.nodes)
 
     @cached_property
     def boundary_edges(self) -> np.ndarray:
