@@ -39,7 +39,7 @@ from ..optimizer.soft_ik import SoftIK
 from ..physics.capstan import perp
 from ..physics.waypoints import rest_point_gradient
 from .realizable import tendon_cables
-from .routes import Route
+from .routes import Route, polyline_length
 
 #: the weight of the friction cost, in units of the budget (a fraction of L) squared ...
 PRICE_PER_BUDGET = 8.0
@@ -213,7 +213,8 @@ class RouteObjective:
         """O and dO/dz at z; raises ConvergenceError when an equilibrium fails or a
         route has shrunk to a point (``COLLAPSED``)."""
         routes, ratios = self.unpack(z)
-        if min(r.length for r in routes) <= COLLAPSED * self.L:
+        points = [r.waypoints for r in routes]
+        if min(polyline_length(p) for p in points) <= COLLAPSED * self.L:
             raise ConvergenceError("a route has shrunk to a point")
         ik = self.soft_ik(routes)
         f, g_r = ik.evaluate(ratios.ravel())
@@ -221,7 +222,6 @@ class RouteObjective:
         gX = np.zeros((ik.model.P, 2))
         for ps, lam in zip(ik.poses, ik.adjoints):
             gX -= rest_point_gradient(ps.model, lam)
-        points = [r.waypoints for r in routes]
         ff, gf = shape_cost(points, self.rs)
         fc, gc = self.clearance_cost(np.concatenate(points))
         gX += np.concatenate(gf) + gc
