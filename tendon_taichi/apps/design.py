@@ -222,8 +222,9 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
     if not done:
         raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
     ms = MetricSettings(mu=problem.scene.tendons.friction)
-    priors = None if prior is None else prior_layouts(prior, problem)
+    priors = None
     if prior is not None:
+        priors = prior_layouts(prior, problem)
         log(f"{len(priors)} of the {len(prior.layouts)} layouts of '{prior.path}' join the front's seeds")
     front = search_front(problem, ex.state, ex.run.settings, done, cons, solver, max_tendons, beam, log, workers,
                          priors)
