@@ -45,7 +45,8 @@ def designed(tmp_path_factory):
     d = tmp_path_factory.mktemp("design")
     (d / "finger.toml").write_text(SCENE)
     r = run_cli("design", "finger.toml", "--out", "out", "--stage-iterations", "25", "--k-min", "0.1",
-                "--extractors", "strands", "path_cover", "--refine", "1", "--json", "out.json", cwd=d)
+                "--extractors", "strands", "path_cover", "--refine", "1", "--min-capstan", "0.5", "--json", "out.json",
+                cwd=d)
     assert r.returncode == 0, r.stderr
     return d, r
 
@@ -62,6 +63,7 @@ def test_design_writes_every_output_and_nothing_else(designed):
         assert key in summary
     assert summary["friction"] == 0.15 and summary["clearance"] == 0.02 and summary["budget"] == 0.005
     rec = summary["recommended"]
+    assert summary["min_capstan"] == 0.5 and rec["meets_min_capstan"] is (rec["metrics"]["capstan_worst"] >= 0.5)
     assert rec["count"] == len(rec["tendons"]) >= 1
     for t in rec["tendons"]:
         assert len(t["contraction"]) == 1 and t["tension"] > 0 and 0 < t["capstan"] <= 1
@@ -174,6 +176,20 @@ def test_recommendation_is_the_fewest_tendons_within_the_budget():
     assert recommend(entries, 0.005, 1)["id"] == "1-0.02-1.0-0.1"
 
 
+def test_a_capstan_limit_takes_the_fewest_tendons_that_keep_it():
+    """--min-capstan: within the budget, the fewest tendons whose worst capstan keeps
+    the limit; when no layout within the budget keeps it, the rule without it."""
+    entries = [_entry(3, 0.001, 0.9, 0.2), _entry(2, 0.004, 0.80, 0.15), _entry(2, 0.0045, 0.85, 0.18),
+               _entry(2, 0.0046, 0.85, 0.12), _entry(1, 0.003, 0.7, 0.1), _entry(1, 0.02, 0.99, 0.1)]
+    assert recommend(entries, 0.005, None)["id"] == "1-0.003-0.7-0.1"
+    assert recommend(entries, 0.005, None, 0.7)["id"] == "1-0.003-0.7-0.1"  # the limit itself is kept
+    assert recommend(entries, 0.005, None, 0.75)["id"] == "2-0.0046-0.85-0.12"
+    assert recommend(entries, 0.005, None, 0.88)["id"] == "3-0.001-0.9-0.2"
+    assert recommend(entries, 0.005, None, 0.95)["id"] == "1-0.003-0.7-0.1"  # none keeps it: set aside
+    assert recommend(entries, 0.005, 2, 0.88)["id"] == "1-0.003-0.7-0.1"  # none of at most 2 keeps it
+    assert recommend(entries, 0.0005, None, 0.88)["id"] == "3-0.001-0.9-0.2"  # none within: the lowest error
+
+
 def test_the_table_marks_the_recommended_design_once():
     from tendon_taichi.cli.design import table
 
@@ -191,6 +207,11 @@ def test_the_table_marks_the_recommended_design_once():
     assert [ln.split()[:2] for ln in rows] == [["1", "2.00%"], ["2", "*"], ["3", "0.10%"]]  # one row per count
     assert rows[1].split()[2:4] == ["0.30%", "0.27%"]  # re-solved at level 2, then at the design's level
     assert "re-solved at level 2" in text[1] and text[-2].startswith("recommended: 2 tendon(s)")
+    assert not any("--min-capstan" in ln for ln in text) and "min capstan" not in text[0]
+    summary.update(min_capstan=0.995)
+    summary["recommended"]["meets_min_capstan"] = False
+    text = table(summary)
+    assert "min capstan 0.995" in text[0] and "keeps 0.995 of its pull" in text[-2]  # the limit set aside, said
 
 
 @pytest.mark.parametrize("args, message", [
@@ -204,6 +225,9 @@ def test_the_table_marks_the_recommended_design_once():
     (["--budget", "1.5"], "--budget must be a fraction of L in (0, 1)"),
     (["--beam", "0"], "--beam must be an integer >= 1"),
     (["--workers", "-1"], "--workers must be >= 0"),
+    (["--min-capstan", "1.5"], "--min-capstan must be a fraction in [0, 1]"),
+    (["--min-capstan", "-0.1"], "--min-capstan must be a fraction in [0, 1]"),
+    (["--min-capstan", "nan"], "--min-capstan must be a fraction in [0, 1]"),
 ])
 def test_bad_values_give_one_line_and_write_nothing(cli, tmp_path, args, message):
     r = cli("design", "t_shape", "--out", "out", *args, cwd=tmp_path)

@@ -83,16 +83,19 @@ def front_rows(front: Front, fine: dict | None, mu: float, kink_angle: float) ->
     return rows
 
 
-def recommend(rows: list[dict], budget: float, max_tendons: int | None = None) -> dict:
+def recommend(rows: list[dict], budget: float, max_tendons: int | None = None, min_capstan: float = 0.0) -> dict:
     """The fewest tendons (at most ``max_tendons``) whose as-built error is within
-    ``budget`` (fraction of L), the best worst capstan among them, then the
-    shortest; when none is within it, the lowest as-built error."""
+    ``budget`` (fraction of L) and whose worst capstan factor is at least
+    ``min_capstan`` (the pull that reaches a tendon's far end, a fraction), the best
+    worst capstan among them, then the shortest; when none keeps the capstan limit,
+    the same without it; when none is within the budget, the lowest as-built error."""
     pool = [e for e in rows if max_tendons is None or e["count"] <= max_tendons]
     if not pool:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)")
     within = [e for e in pool if e["realizable_pose_error_rel"] <= budget]
-    if within:
-        return min(within, key=lambda e: (e["count"], -e["capstan_worst"], e["total_length"]))
+    kept = [e for e in within if e["capstan_worst"] >= min_capstan] or within
+    if kept:
+        return min(kept, key=lambda e: (e["count"], -e["capstan_worst"], e["total_length"]))
     return min(pool, key=lambda e: (e["realizable_pose_error_rel"], e["count"]))
 
 
@@ -159,7 +162,8 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
            budget: float = BUDGET, max_tendons: int | None = None, extractors: list[str] | None = None,
            consolidation: ConsolidationSettings | None = None, progress: Progress | None = None,
            plugin_timeout: float | None = None, png: bool = True, beam: int = BEAM,
-           converge: bool = True, workers: int = 0, routes_from: str | Path | None = None) -> Design:
+           converge: bool = True, workers: int = 0, routes_from: str | Path | None = None,
+           min_capstan: float = 0.0) -> Design:
     """The main job (module docstring) on ``scene`` at ``level`` into the folder
     ``out`` (default :func:`default_out`); ``budget`` (fraction of L) both bounds
     consolidation (unless ``consolidation`` says otherwise) and picks the
@@ -170,7 +174,9 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     cores (from a script: under ``if __name__ == "__main__":``, as
     :mod:`~tendon_taichi.tasks.pool` says); ``routes_from``, a prior design of the
     same body (its folder or ``design.json``, checked before anything is computed),
-    whose front's layouts the front searches from too (:mod:`.priors`)."""
+    whose front's layouts the front searches from too (:mod:`.priors`);
+    ``min_capstan``, the least worst capstan factor the recommendation accepts
+    (:func:`recommend`)."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     prior = None if routes_from is None else read_prior(routes_from, scene)
@@ -183,7 +189,7 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
                          + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
         run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
         ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
-                                          plugin_timeout, beam, converge, pool, prior)
+                                          plugin_timeout, beam, converge, pool, prior, min_capstan)
     if pool.broken:
         progress.message(f"design: {pool.broken}")
     summary["timing"]["optimize_s"] = run.summary["time_s"]
@@ -197,12 +203,12 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
 def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int | None = None,
                 extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
                 progress: Progress | None = None, plugin_timeout: float | None = None, beam: int = BEAM,
-                converge: bool = True, workers: Pool | None = None,
-                prior: PriorDesign | None = None) -> tuple[Extraction, Layout, dict]:
+                converge: bool = True, workers: Pool | None = None, prior: PriorDesign | None = None,
+                min_capstan: float = 0.0) -> tuple[Extraction, Layout, dict]:
     """Every extractor on a recorded run's last stage, consolidated and routed, the
     count/error front searched from all their routes (:func:`search_front`), each
     front entry solved again on the next finer mesh (``converge``), and the layout
-    recommended (:func:`recommend`): the extraction, the layout and the summary
+    recommended (:func:`recommend`, with ``min_capstan``): the extraction, the layout and the summary
     ``design.json`` holds (no file is written). ``workers`` (a pool of worker
     processes) share the consolidations and the front's independent pieces;
     ``prior``'s front layouts (:func:`~.priors.read_prior`) join the front's seeds."""
@@ -233,9 +239,11 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
                          else "no extractor's tendons make a layout of one tendon or more")
     fine = finer_mesh_errors(ex, front, cons, solver, log, workers) if converge else None
     rows = front_rows(front, fine, ms.mu, ms.kink_angle)
-    chosen = recommend(rows, budget, max_tendons)
+    chosen = recommend(rows, budget, max_tendons, min_capstan)
     layout = front.layouts[chosen["count"]]
     summary = _summary(ex, layout, chosen, rows, budget, max_tendons, ms)
+    summary["min_capstan"] = min_capstan
+    summary["recommended"]["meets_min_capstan"] = chosen["capstan_worst"] >= min_capstan
     summary["search"] = {**front.as_json(), "beam": beam, "routes_from": None if prior is None else str(prior.path),
                          "converged_resolution": None if fine is None else fine["resolution"],
                          **({"converge_error": fine["error"]} if fine and fine.get("error") else {})}

@@ -21,6 +21,8 @@ def _checked(args) -> tuple[float, int | None]:
         raise InputError(f"--budget must be a fraction of L in (0, 1) (got {args.budget:g})")
     if args.max_tendons is not None and args.max_tendons < 1:
         raise InputError(f"--max-tendons must be an integer >= 1 (got {args.max_tendons})")
+    if not (math.isfinite(args.min_capstan) and 0.0 <= args.min_capstan <= 1.0):
+        raise InputError(f"--min-capstan must be a fraction in [0, 1] (got {args.min_capstan:g})")
     if args.workers is not None and args.workers < 0:
         raise InputError(f"--workers must be >= 0 (got {args.workers})")
     return args.budget, args.max_tendons
@@ -33,7 +35,8 @@ def table(summary: dict) -> list[str]:
     fine = summary.get("search", {}).get("converged_resolution")
     level = summary["resolution"]
     out = [f"{summary['scene']} level {level} (L = {100 * summary['body_size']:.2f} cm, friction "
-           f"{summary['friction']:g}, clearance {summary['clearance']:g} L, budget {100 * summary['budget']:g}% of L)",
+           f"{summary['friction']:g}, clearance {summary['clearance']:g} L, budget {100 * summary['budget']:g}% of L"
+           + (f", min capstan {summary['min_capstan']:g}" if summary.get("min_capstan") else "") + ")",
            "the front (per tendon count, the best layout found; * the recommended design):",
            f"{'tendons':>7} {'as built':>9} {f'level {level}':>9} {'capstan':>7} {'kinks':>5} {'length':>8}  from"]
     if fine is not None:
@@ -52,6 +55,9 @@ def table(summary: dict) -> list[str]:
                f"{100 * m['realizable_pose_error_rel_level']:.2f}%, frictionless "
                f"{100 * m['realizable_pose_error_rel_frictionless']:.2f}%), worst capstan {m['capstan_worst']:.3f}, "
                f"{m['kinks']} kinks, clearance {1e3 * (m['clearance_min'] or 0):.1f} mm")
+    if not rec.get("meets_min_capstan", True):
+        out.append(f"  (no layout within the budget keeps {summary['min_capstan']:g} of its pull in every tendon, "
+                   "--min-capstan: the limit was set aside)")
     for i, t in enumerate(rec["tendons"]):
         pulls = ", ".join(f"{1e3 * c:.2f}" for c in t["contraction"])
         out.append(f"  tendon {i + 1}: {100 * t['length']:.1f} cm, pull {pulls} mm, tension {t['tension']:.3f} N, "
@@ -76,7 +82,7 @@ def cmd_design(args) -> int:
     result = design(scene, args.resolution, args.out, args.solver, budget, max_tendons, args.extractors, cons,
                     Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png,
                     workers=default_workers() if args.workers is None else args.workers,
-                    routes_from=args.routes_from, **front)
+                    routes_from=args.routes_from, min_capstan=args.min_capstan, **front)
     summary = result.summary
     json_out(args, summary)
     if args.json != "-":
@@ -97,6 +103,10 @@ def add_commands(sub) -> None:
                         "design is the fewest tendons within it")
     s.add_argument("--max-tendons", type=int, default=None, metavar="K",
                    help="recommend at most K tendons")
+    s.add_argument("--min-capstan", type=float, default=0.0, metavar="F",
+                   help="recommend only layouts whose every tendon keeps at least F of its pull against its "
+                        "channel's friction (worst capstan factor; default 0: no limit); when none within "
+                        "the budget does, the recommendation says so and ignores the limit")
     add_front_flags(s)
     s.add_argument("--routes-from", metavar="DESIGN",
                    help="also search from a prior design of the same body (its folder or design.json, for "
