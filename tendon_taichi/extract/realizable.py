@@ -3,9 +3,11 @@ tendons, each a cable through its waypoints (a lattice tendon's fiber nodes, or
 a smooth route's waypoints located in the rest mesh) with one rest length,
 pulled at its last waypoint and sliding through the others with the scene's
 capstan friction - the *as-built* robot (frictionless where mu = 0). Its tendon
-contractions are found by the same soft IK as the idealized robot (pose
-objective, bounds [-pmax, cmax] on c / L0, adjoint gradient) - a handful of
-variables.
+contractions minimize the same soft-IK objective as the idealized robot's stage
+0 (pose and contraction terms, bounds [-pmax, cmax] on c / L0) - a least-squares
+problem in a handful of variables, solved by bounded Gauss-Newton
+(:mod:`~tendon_taichi.optimizer.gauss_newton`; L-BFGS-B where a plugin adds a
+term that is not a sum of squares).
 
 :func:`predict_realizable` estimates a layout's realizable pose error far more
 cheaply, by one Gauss-Newton step from a nearby solved layout; consolidation
@@ -17,14 +19,15 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
 from ..body.cables import CableSet
 from ..body.mesh import Embedding
 from ..body.problem import Problem
 from ..objective.settings import OptimizeSettings
+from ..optimizer.gauss_newton import applies, gauss_newton, target_jacobian
+from ..optimizer.gauss_newton import step as gauss_newton_step  # predict_realizable's one step
 from ..optimizer.homotopy import RunCallbacks, run_stage
-from ..optimizer.soft_ik import ADJOINT_TOL, EVAL_TOL, PoseSolve, SoftIK, pose_errors
+from ..optimizer.soft_ik import EVAL_TOL, SoftIK, pose_errors
 from ..physics.model import Model
 from ..solve.newton import NewtonSolver
 from .protocol import IdealizedState, Tendon
@@ -146,7 +149,8 @@ def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedSt
                                 0, 0, time.perf_counter() - t0)
     ik = SoftIK(problem, settings, solver, cables=tendon_cables(problem, tendons))
     r0 = warm_ratios(problem, tendons, state, tensions) if start is None else np.asarray(start, dtype=float)
-    st = run_stage(ik, 0, r0, RunCallbacks(), warm=None if positions is None else [positions])
+    warm = None if positions is None else [positions]
+    st = gauss_newton(ik, r0, warm) if applies(ik) else run_stage(ik, 0, r0, RunCallbacks(), warm=warm)
     f = st.figures
     return RealizableResult(st.ac, st.r, st.tau, st.x, f.pose_error, f.pose_error_rel, f.pose_error_max,
                             st.iterations, st.evaluations, time.perf_counter() - t0)
@@ -172,24 +176,10 @@ def predict_realizable(problem: Problem, tendons: list[Tendon], settings: Optimi
         eq = ps.solve(r * cables.a0, EVAL_TOL)
         res = ((ps.problem.target_positions(eq.x) - ps.problem.target_goal) / L).ravel()
         A = target_jacobian(ps, cables.a0).reshape(len(res), -1) / L
-        step = lsq_linear(np.vstack([A, w * np.eye(len(r))]), -np.concatenate([res, w * r]),
-                          bounds=(-fs.max_payout - r, fs.max_contraction - r), method="bvls").x
+        step = gauss_newton_step(res, A, r, w, -fs.max_payout, fs.max_contraction)
         err2 += float(np.sum((res + A @ step) ** 2))
         out[i] = np.clip(r + step, -fs.max_payout, fs.max_contraction)
     return float(np.sqrt(err2)), out
-
-
-def target_jacobian(ps: PoseSolve, a0: np.ndarray) -> np.ndarray:
-    """d(target positions)/d(c / L0) at the pose's last equilibrium, (t, 2, T) m:
-    per cable j the sensitivity dx*/dr_j = -H^-1 (d2E/dx dac) a0_j e_j, read at the
-    targets (their positions are linear in x)."""
-    def rhs():
-        for j in range(len(a0)):
-            b = ps.model.mixed_product(a0[j] * np.eye(1, len(a0), j).ravel())
-            b[ps.problem.fixed] = 0.0
-            yield b
-
-    return np.stack([-ps.problem.target_positions(dx) for dx in ps.sensitivities(rhs(), ADJOINT_TOL)], axis=-1)
 
 
 def as_built_arrays(problem: Problem, tendons: list[Tendon], real: RealizableResult) -> dict:
