@@ -66,3 +66,23 @@ def test_only_the_realizable_sum_of_squares_is_solved_by_it(t_shape):
     ik.objective.active = ik.objective.active | {"a plugin's term"}
     assert not applies(ik)
     assert not applies(SoftIK(p, p.scene.optimize, "direct"))  # the fiber lattice's objective
+
+
+def test_the_box_keeps_it_in_the_starts_basin(monkeypatch):
+    """Two routes a finger design solved (``tests/data/finger_basin.json``): from their
+    start an unboxed Gauss-Newton step leaves the start's basin and ends far worse than
+    L-BFGS-B; inside the box it ends no worse."""
+    import json
+    from pathlib import Path
+
+    from tendon_taichi.optimizer import gauss_newton as gn
+
+    data = json.loads((Path(__file__).parent / "data" / "finger_basin.json").read_text())
+    p = build_problem(load_scene(data["scene"]), data["level"])
+    cables = CableSet.polylines(p.mesh, [np.array(w) for w in data["waypoints"]], p.scene.fibers.stiffness,
+                                friction=p.scene.tendons.friction)
+    start = np.array(data["start"])
+    lbfgs = run_stage(_ik(p, cables), 0, start, RunCallbacks()).figures.pose_error_rel
+    assert gauss_newton(_ik(p, cables), start).figures.pose_error_rel <= lbfgs + 1e-7
+    monkeypatch.setattr(gn, "RADIUS", 1e9)
+    assert gauss_newton(_ik(p, cables), start).figures.pose_error_rel > lbfgs + 1e-5  # the hazard
