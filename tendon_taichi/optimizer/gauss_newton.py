@@ -17,16 +17,15 @@ at first ``RADIUS`` in contraction ratio, shrunk where the objective falls by
 less than a quarter of what the linear model predicts, doubled where it falls
 as predicted with the step at the box's edge. The box matters: the unilateral
 cables make the problem non-convex, and an unbounded first step can land in
-another basin than the start's (measured: 2 of 81 solves of a finger design
-ended 50x worse than L-BFGS-B's without it, none with it).
+another basin than the start's (``benchmarks/realizable_side_by_side.py``;
+docs/method.md has the figures).
 
 It stops when the full (unboxed) step predicts a decrease of at most
 ``DECREASE_TOL`` of the objective, when ``SETTLE_WINDOW`` steps lowered the
 objective's root (the pose error, fraction of L, where the regularizer is
 small) by at most ``SETTLE``, or when the box has shrunk to nothing. Each
 step costs one equilibrium and, when it is taken, T solves with one
-factorization: about 2.5x fewer equilibria than L-BFGS-B on the same
-objective.
+factorization: 2-4x fewer equilibria than L-BFGS-B on the same objective.
 """
 
 from __future__ import annotations
