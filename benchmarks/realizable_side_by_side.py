@@ -1,16 +1,17 @@
 """The realizable robot's two solvers side by side on the solves a real command makes.
 
-Usage: python benchmarks/realizable_side_by_side.py SCENE [LEVEL]
+Usage: python benchmarks/realizable_side_by_side.py SCENE [LEVEL] [DESIGN FLAGS ...]
 
-Runs ``tendon-taichi design SCENE --resolution LEVEL`` (default level 1) in
-this process, into a temporary folder, and solves every realizable robot the
-design solves twice more from the same start - by bounded Gauss-Newton (what
-``solve_realizable`` uses) and by L-BFGS-B (``run_stage``, what it used before)
-- then prints how many Gauss-Newton solves ended worse or better than
-L-BFGS-B's by more than 1e-7 L, the largest differences, and the equilibria
-and time each solver took in all. The design itself goes on with
-Gauss-Newton's result. docs/method.md ("The realizable (as-built) robot")
-quotes its figures for finger, t_shape and finger_updown at level 1.
+Runs ``tendon-taichi design SCENE --resolution LEVEL`` (default level 1, and
+any further ``design`` flags given) in this process, into a temporary folder,
+and solves every realizable robot the design solves twice more from the same
+start - by bounded Gauss-Newton (what ``solve_realizable`` uses) and by
+L-BFGS-B (``run_stage``, what it used before). After the design's own table it
+prints how many Gauss-Newton solves ended worse or better than L-BFGS-B's by
+more than 1e-7 L, the largest differences, and the equilibria and time each
+solver took in all. The design itself goes on with Gauss-Newton's result.
+docs/method.md ("The realizable (as-built) robot") quotes its figures for
+finger, t_shape and finger_updown at level 1.
 """
 
 import sys
@@ -61,10 +62,14 @@ def report() -> None:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) not in (2, 3):
+    if len(sys.argv) < 2:
         sys.exit(__doc__.split("\n\n")[1])
+    scene, rest = sys.argv[1], sys.argv[2:]
+    level = rest.pop(0) if rest and rest[0].isdigit() else "1"
     realizable.solve_realizable = _both
     with tempfile.TemporaryDirectory() as out:
-        main(["design", sys.argv[1], "--resolution", sys.argv[2] if len(sys.argv) == 3 else "1", "--out", out,
-              "--quiet", "--workers", "0", "--no-png"])
+        code = main(["design", scene, "--resolution", level, "--out", out, "--quiet", "--workers", "0", "--no-png",
+                     *rest])
+    if code:
+        sys.exit(code)
     report()
