@@ -37,7 +37,7 @@ from scipy.optimize import lsq_linear
 
 from ..errors import ConvergenceError
 from ..objective.objective import union_tension
-from .homotopy import StageResult
+from .homotopy import StageResult, final_state
 from .soft_ik import ADJOINT_TOL, PoseSolve, SoftIK
 
 #: the terms whose sum is the least-squares objective this solver minimizes
@@ -166,13 +166,6 @@ def gauss_newton(ik: SoftIK, r_start: np.ndarray, warm: list[np.ndarray] | None 
         elif radius < MIN_RADIUS:
             message = "no decrease near the point"
             break
-    r = now.r
-    # the final state, solved from rest (as replay recomputes it) or settled where it is
-    if warm is None:
-        ik.restart(r)
-    else:
-        ik.settle(r)
-    fig = ik.figures(r)
-    xs, taus = ik.state()
-    return StageResult(0, None, iterations, evaluations, time.perf_counter() - t0, fig, r, r * ik.a0,
+    fig, xs, taus = final_state(ik, now.r, warm)
+    return StageResult(0, None, iterations, evaluations, time.perf_counter() - t0, fig, now.r, now.r * ik.a0,
                        union_tension(taus)[0], xs, taus, message)

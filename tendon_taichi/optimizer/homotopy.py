@@ -133,19 +133,26 @@ def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbac
                       options={"maxiter": s.stage_iterations, "ftol": 1e-15, "gtol": 1e-12,
                                "maxcor": 10, "maxls": 40})
     r = np.clip(res.x, -fs.max_payout, fs.max_contraction)
-    # the stage's final state, solved from rest (what replay recomputes) or settled where it is
-    if warm is None:
-        ik.restart(r)
-    else:
-        ik.settle(r)
-    fig = ik.figures(r)
-    xs, taus = ik.state()
+    fig, xs, taus = final_state(ik, r, warm)
     message = "settled" if res.status == 99 or "StopIteration" in str(res.message) else str(res.message)
     out = StageResult(stage, k, int(res.nit), ik.evaluations - ev0, time.perf_counter() - t0, fig,
                       r, r * ik.a0, union_tension(taus)[0], xs, taus, message)
     for cb in callbacks.on_stage:
         cb(out)
     return out
+
+
+def final_state(ik: SoftIK, r: np.ndarray, warm: list[np.ndarray] | None) -> tuple[Figures, np.ndarray, np.ndarray]:
+    """A stage's final state at ``r``: each pose's equilibrium solved from rest (what
+    replay recomputes) or, after a ``warm`` start, settled where it is; its figures,
+    positions (P, n, 2) and tensions (P, C)."""
+    if warm is None:
+        ik.restart(r)
+    else:
+        ik.settle(r)
+    fig = ik.figures(r)
+    xs, taus = ik.state()
+    return fig, xs, taus
 
 
 def run_schedule(ik: SoftIK, callbacks: RunCallbacks | None = None,
