@@ -241,9 +241,7 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
     rows = front_rows(front, fine, ms.mu, ms.kink_angle)
     chosen = recommend(rows, budget, max_tendons, min_capstan)
     layout = front.layouts[chosen["count"]]
-    summary = _summary(ex, layout, chosen, rows, budget, max_tendons, ms)
-    summary["min_capstan"] = min_capstan
-    summary["recommended"]["meets_min_capstan"] = chosen["capstan_worst"] >= min_capstan
+    summary = _summary(ex, layout, chosen, rows, budget, max_tendons, min_capstan, ms)
     summary["search"] = {**front.as_json(), "beam": beam, "routes_from": None if prior is None else str(prior.path),
                          "converged_resolution": None if fine is None else fine["resolution"],
                          **({"converge_error": fine["error"]} if fine and fine.get("error") else {})}
@@ -275,7 +273,7 @@ def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings,
 
 
 def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], budget: float, max_tendons,
-             ms: MetricSettings) -> dict:
+             min_capstan: float, ms: MetricSettings) -> dict:
     problem, run = ex.problem, ex.run
     tendons = layout.tendons()
     real = layout.realizable
@@ -292,8 +290,10 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], bud
     done = [r.consolidation for r in ex.results if r.consolidation is not None]
     return {"scene": problem.scene.name, "resolution": problem.level, "body_size": problem.size,
             "friction": ts.friction, "clearance": ts.clearance, "budget": budget, "max_tendons": max_tendons,
-            "recommended": {"count": layout.count, "source": layout.source, "tendons": tendon_rows(layout, ms.mu),
-                            "metrics": metrics},
+            "min_capstan": min_capstan,
+            "recommended": {"count": layout.count, "source": layout.source,
+                            "meets_min_capstan": chosen["capstan_worst"] >= min_capstan,
+                            "tendons": tendon_rows(layout, ms.mu), "metrics": metrics},
             "front": rows,
             "extractors": [{"name": r.name, "count": r.metrics.get("count"),
                             "realizable_pose_error_rel": r.metrics.get("realizable_pose_error_rel"),

@@ -24,10 +24,10 @@ from ..body.cables import CableSet
 from ..body.mesh import Embedding
 from ..body.problem import Problem
 from ..objective.settings import OptimizeSettings
-from ..optimizer.gauss_newton import applies, gauss_newton, target_jacobian
-from ..optimizer.gauss_newton import step as gauss_newton_step  # predict_realizable's one step
+from ..optimizer.gauss_newton import applies, first_step, gauss_newton
+from ..optimizer.gauss_newton import target_jacobian  # noqa: F401  (its import path before it moved)
 from ..optimizer.homotopy import RunCallbacks, run_stage
-from ..optimizer.soft_ik import EVAL_TOL, SoftIK, pose_errors
+from ..optimizer.soft_ik import SoftIK, pose_errors
 from ..physics.model import Model
 from ..solve.newton import NewtonSolver
 from .protocol import IdealizedState, Tendon
@@ -158,28 +158,17 @@ def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedSt
 
 def predict_realizable(problem: Problem, tendons: list[Tendon], settings: OptimizeSettings, ratios,
                        positions, solver: str = "auto") -> tuple[float, np.ndarray]:
-    """One Gauss-Newton step of the realizable soft IK: the equilibrium at ``ratios``
-    (P, T) c / L0, warm started from ``positions`` (P, n, 2) m (those of a nearby
-    layout), its target Jacobian (:func:`target_jacobian`), and the bounded linear
-    least-squares step of the pose + contraction objective. Returns the predicted
+    """One Gauss-Newton step of the realizable soft IK
+    (:func:`~tendon_taichi.optimizer.gauss_newton.first_step`): the equilibrium at
+    ``ratios`` (P, T) c / L0, warm started from ``positions`` (P, n, 2) m (those of a
+    nearby layout), its target Jacobian (:func:`target_jacobian`), and the bounded
+    linear least-squares step of the pose + contraction objective. Returns the predicted
     pose error (fraction of L, over every pose) and the ratios (P, T) it predicts
     them at. Raises ConvergenceError when an equilibrium cannot be solved."""
-    cables = tendon_cables(problem, tendons)
-    ik = SoftIK(problem, settings, solver, cables=cables)
-    ratios = ik.split(ratios)
-    fs, L = problem.scene.fibers, problem.size
-    w = np.sqrt(settings.contraction_reg)
-    err2, out = 0.0, np.empty_like(ratios)
-    for i, ps in enumerate(ik.poses):
-        r = ratios[i]
-        ps.model.set_positions(positions[i])
-        eq = ps.solve(r * cables.a0, EVAL_TOL)
-        res = ((ps.problem.target_positions(eq.x) - ps.problem.target_goal) / L).ravel()
-        A = target_jacobian(ps, cables.a0).reshape(len(res), -1) / L
-        step = gauss_newton_step(res, A, r, w, -fs.max_payout, fs.max_contraction)
-        err2 += float(np.sum((res + A @ step) ** 2))
-        out[i] = np.clip(r + step, -fs.max_payout, fs.max_contraction)
-    return float(np.sqrt(err2)), out
+    ik = SoftIK(problem, settings, solver, cables=tendon_cables(problem, tendons))
+    for ps, x in zip(ik.poses, positions):
+        ps.model.set_positions(x)
+    return first_step(ik, ik.split(ratios).ravel())
 
 
 def as_built_arrays(problem: Problem, tendons: list[Tendon], real: RealizableResult) -> dict:

@@ -121,6 +121,20 @@ class _Point:
         return d.ravel(), self.value - predicted
 
 
+def first_step(ik: SoftIK, r: np.ndarray) -> tuple[float, np.ndarray]:
+    """One step (no box) from ratios ``r`` (P C,), each pose's equilibrium solved from
+    where its model is: the pose error (fraction of L, over every pose) the linear
+    model predicts after it, and the ratios (P, C) it predicts that at. Raises
+    ConvergenceError when an equilibrium cannot be solved."""
+    fs = ik.problem.scene.fibers
+    bounds = (-fs.max_payout, fs.max_contraction)
+    point = _Point(ik, r, float(np.sqrt(ik.settings.contraction_reg)))
+    point.linearize(ik)
+    d = ik.split(point.step(bounds)[0])
+    err2 = sum(float(np.sum((res + A @ di) ** 2)) for res, A, di in zip(point.res, point.A, d))
+    return float(np.sqrt(err2)), np.clip(ik.split(r) + d, *bounds)
+
+
 def gauss_newton(ik: SoftIK, r_start: np.ndarray, warm: list[np.ndarray] | None = None) -> StageResult:
     """Minimize ``ik``'s least-squares objective (:func:`applies`) from ``r_start``
     (P C,) within [-pmax, cmax], its start and final states solved as
