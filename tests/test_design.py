@@ -83,7 +83,7 @@ def test_design_writes_every_output_and_nothing_else(designed):
         assert all(len(q["control_points"]) >= 2 and len(q["contraction_ratio"]) == 1 for q in e["routes"])
     counts = [e["count"] for e in summary["front"]]
     assert counts == list(range(1, len(counts) + 1))  # every count from 1
-    errors = [e["realizable_pose_error_rel_level"] for e in summary["front"]]
+    errors = [e["realizable_pose_error_rel"] for e in summary["front"]]  # what is reported and recommended by
     assert all(b <= a + MONOTONE for a, b in zip(errors, errors[1:]))  # a tendon more never does worse
     chosen = next(e for e in summary["front"] if e["count"] == rec["count"])
     assert m["realizable_pose_error_rel"] == chosen["realizable_pose_error_rel"]

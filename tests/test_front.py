@@ -273,6 +273,45 @@ def test_the_finer_mesh_chooses_among_each_counts_finished_layouts(searched):
     assert stuck.layouts[2] is poor and res[2].pose_error_rel > 0.005
 
 
+def test_the_finer_mesh_optimizes_each_counts_routes_again(searched):
+    """With route optimization on (one round), each count's routes are optimized
+    again on the finer mesh: the routes held then cost no more there than any
+    layout finished for the count as it was; the error reported is the new
+    routes' there (the same as solving them there alone from those
+    contractions); the layout held is their robot on the design mesh. The
+    one-tendon layout (its routes never optimized: refine 0 in the search)
+    gains. With route optimization off, nothing is optimized again."""
+    import copy
+    from dataclasses import replace
+
+    from tendon_taichi import build_problem
+    from tendon_taichi.extract.consolidation import _Search, route_settings
+
+    p, st, _, searched_front = searched
+    fine = replace(build_problem(p.scene, 2), target_goal=p.target_goal)
+    fine_state = pose_only_state(fine)
+    options = replace(OPTIONS, refine=1)
+    search = _Search(p, st, p.scene.optimize, "direct", options, route_settings(p, options), "test", None)
+    before = {k: min(search.cost(lay.routes, converged_error(fine, lay, fine_state, p.scene.optimize,
+                                                             "direct").pose_error_rel)
+                     for lay in [searched_front.layouts[k]] + searched_front.finished.get(k, []))
+              for k in searched_front.layouts}
+    front = copy.deepcopy(searched_front)
+    res = converge_front(front, p, st, fine, p.scene.optimize, options, "direct")
+    assert 1 in front.refit and front.as_json()["refit"] == front.refit
+    for k, lay in front.layouts.items():
+        assert search.cost(lay.routes, res[k].pose_error_rel) <= before[k] * (1 + 1e-9), k
+        assert lay.realizable.x.shape == (p.mesh.n_nodes, 2)  # the design mesh's robot ...
+        alone = converged_error(fine, lay, fine_state, p.scene.optimize, "direct", start=res[k].ratios)
+        assert alone.pose_error_rel == pytest.approx(res[k].pose_error_rel, rel=1e-6, abs=1e-9)  # ... of these routes
+    assert search.cost(front.layouts[1].routes, res[1].pose_error_rel) < 0.9 * before[1]
+    errors = [res[k].pose_error_rel for k in sorted(res)]
+    assert all(b <= a + 1e-6 for a, b in zip(errors, errors[1:])), errors
+    off = copy.deepcopy(searched_front)
+    converge_front(off, p, st, fine, p.scene.optimize, OPTIONS, "direct")
+    assert off.refit == []
+
+
 def test_a_route_cut_short_is_carried_on_along_its_tangent(searched):
     """A layout of the stem route and an arm route that stops halfway along the
     planted arm tendon: carried on straight along its tangent at the cut end, the

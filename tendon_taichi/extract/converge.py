@@ -2,7 +2,8 @@
 are curves in the rest body, so each finished layout of the front
 (:class:`~.front.Front`) can be embedded in the next finer mesh of the same body
 and its contractions solved again there; :func:`converge_front` keeps, per
-count, the least costly there and the front monotone there."""
+count, the least costly there, optimizes its routes again there, and keeps the
+front monotone there."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from ..body.problem import Problem
 from ..errors import ConvergenceError
 from ..objective.settings import OptimizeSettings
 from ..tasks.pool import Pool
-from .consolidation import Consolidation, Layout, _Search, route_settings
+from .consolidation import Consolidation, Layout, _Search, _solve_task, route_settings
 from .front import PRECISION, Front, _key, _with_one_more
 from .protocol import IdealizedState
 from .realizable import RealizableResult, solve_realizable_poses
@@ -48,39 +49,24 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
     where none can be solved), in place: of the layout held and every other one
     finished for that count (``front.finished``), the least costly there (its pose
     error there squared plus its routes' shape cost; the one held on ties) becomes
-    the count's. The front is then kept monotone there: where a count's error is
-    above the count below's by more than ``PRECISION``, that smaller layout with
-    one more pooled route (the best on ``problem``'s mesh from each start,
-    :func:`_with_one_more`, where that keeps the front on ``problem``'s mesh
-    monotone) is solved on ``fine`` as well and replaces the front's layout when it
-    does better there. ``workers`` share the solves of the finished layouts."""
+    the count's, and its routes are optimized again there (:func:`_refit`). The
+    front is then kept monotone there: where a count's error is above the count
+    below's by more than ``PRECISION``, that smaller layout with one more pooled
+    route (the best on ``problem``'s mesh from each start, :func:`_with_one_more`,
+    where that keeps the front on ``problem``'s mesh monotone) is solved on
+    ``fine`` as well and replaces the front's layout when it does better there.
+    ``workers`` share the solves of the finished layouts and the refits."""
     fine_state = pose_only_state(fine)
     search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
     search.out = Consolidation(next(iter(front.layouts.values())), 0, 0.0)
     search.workers = workers
     size = problem.size
+    task = partial(_fine_task, (fine, fine_state, settings, solver))
+    there = _least_costly_there(search, front, task)
+    _refit(search, front, there, fine, fine_state)
     out: dict[int, RealizableResult | None] = {}
-    spec = (fine, fine_state, settings, solver)
-    choices = {}
     for k in sorted(front.layouts):
-        key = _key(front.layouts[k], size)
-        choices[k] = [front.layouts[k]] + [m for m in front.finished.get(k, []) if _key(m, size) != key]
-    jobs = [(lay, None) for k in sorted(choices) for lay in choices[k]]
-    if len(jobs) > len(choices):
-        search.log(f"front: the {len(jobs)} finished layouts on the finer mesh")
-    task = partial(_fine_task, spec)
-    found = workers.map(task, jobs) if workers is not None else [task(job) for job in jobs]
-    solved = {id(lay): res for (lay, _), res in zip(jobs, found)}
-    for k in sorted(front.layouts):
-        held, others = choices[k][0], choices[k][1:]
-        res = solved[id(held)]
-        best = np.inf if res is None else search.cost(held.routes, res.pose_error_rel)
-        for lay in others:
-            there = solved[id(lay)]
-            cost = np.inf if there is None else search.cost(lay.routes, there.pose_error_rel)
-            if cost < best - PRECISION ** 2:
-                front.layouts[k], res, best = lay, there, cost
-        below = out.get(k - 1)
+        res, below = there[k], out.get(k - 1)
         if below is not None and (res is None or res.pose_error_rel > below.pose_error_rel + PRECISION):
             smaller = front.layouts[k - 1]
             for lay in [m for m in _with_one_more(search, smaller, front.routes, size)
@@ -94,7 +80,83 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
         out[k] = res
     front.evaluations += search.out.evaluations
     front.screened += search.out.screened
+    front.route_evaluations += search.out.route_evaluations
+    front.route_s += search.out.route_s
     return out
+
+
+def _least_costly_there(search: _Search, front: Front, task: Callable) -> dict[int, RealizableResult | None]:
+    """Per count, of the layout held and every other one finished for it, the least
+    costly on the finer mesh (``task``: :func:`_fine_task` with that mesh; the one
+    held on ties) made the count's, in place, and its as-built robot there (None
+    where none can be solved); the search's workers share the solves."""
+    size = search.problem.size
+    choices = {}
+    for k in sorted(front.layouts):
+        key = _key(front.layouts[k], size)
+        choices[k] = [front.layouts[k]] + [m for m in front.finished.get(k, []) if _key(m, size) != key]
+    jobs = [(lay, None) for k in sorted(choices) for lay in choices[k]]
+    if len(jobs) > len(choices):
+        search.log(f"front: the {len(jobs)} finished layouts on the finer mesh")
+    workers = search.workers
+    found = workers.map(task, jobs) if workers is not None else [task(job) for job in jobs]
+    solved = {id(lay): res for (lay, _), res in zip(jobs, found)}
+    there: dict[int, RealizableResult | None] = {}
+    for k in sorted(front.layouts):
+        held, others = choices[k][0], choices[k][1:]
+        res = solved[id(held)]
+        best = np.inf if res is None else search.cost(held.routes, res.pose_error_rel)
+        for lay in others:
+            got = solved[id(lay)]
+            cost = np.inf if got is None else search.cost(lay.routes, got.pose_error_rel)
+            if cost < best - PRECISION ** 2:
+                front.layouts[k], res, best = lay, got, cost
+        there[k] = res
+    return there
+
+
+def _refit(search: _Search, front: Front, there: dict[int, RealizableResult | None], fine: Problem,
+           fine_state: IdealizedState) -> None:
+    """Each count's routes optimized again on the finer mesh ``fine`` (one round, from
+    its robot solved there, ``there[k]``), in place: where that lowers its cost there,
+    the new routes, solved on the design mesh from their new contractions, become the
+    count's layout and ``there[k]`` their robot on ``fine``. Route optimization on one
+    mesh fits that mesh's discretization too (gripper_planted_3t_s2 at level 1: two
+    tendons 1e-6 L on level 1, 0.40 % of L on level 2 as they are, 1e-6 L there once
+    optimized again); the finer mesh's fit is nearer the body's. The search's workers
+    share the optimizations."""
+    fine_search = _Search(fine, fine_state, search.settings, search.solver, search.options, search.rs, "front",
+                          search.log)
+    fine_search.out, fine_search.workers = search.out, search.workers
+    counts = [k for k in sorted(front.layouts) if there[k] is not None and front.layouts[k].routes]
+    if not counts or not search.options.refine:
+        return
+    search.log(f"front: the routes of {len(counts)} layout(s) optimized again on the finer mesh")
+    starts = [Layout(front.layouts[k].routes, there[k], fine_search.cost(front.layouts[k].routes,
+                                                                        there[k].pose_error_rel),
+                     front.layouts[k].source) for k in counts]
+    done = fine_search.each(partial(_refitted, fine_search), _refit_task, [(lay,) for lay in starts])
+    changed = [(k, lay) for k, lay, was in zip(counts, done, starts) if lay.cost < was.cost]
+    P = search.problem.n_poses
+    coarse = search.each(search.solve, _solve_task,
+                         [(lay.routes, np.atleast_2d(lay.realizable.ratios).reshape(P, -1), front.layouts[k])
+                          for k, lay in changed])
+    for (k, lay), here in zip(changed, coarse):
+        if here is not None:
+            front.layouts[k] = replace(here, source=front.layouts[k].source, optimized=True)
+            there[k] = lay.realizable
+            front.refit.append(k)
+
+
+def _refitted(search: _Search, layout: Layout) -> Layout:
+    """``layout`` (solved on the search's mesh) with its routes optimized there, one round."""
+    return search.optimize(layout, 1)
+
+
+def _refit_task(spec: tuple, job: tuple[Layout]) -> tuple[Layout, dict]:
+    """:func:`_refitted` as a worker process runs it."""
+    search = _Search.again(spec, job[0])
+    return _refitted(search, job[0]), search.tally()
 
 
 def _fine_task(spec: tuple, job: tuple[Layout, np.ndarray | None]) -> RealizableResult | None:

@@ -131,7 +131,8 @@ class Front:
     routes (``routes``), ``evaluations`` layouts solved in full, ``screened``
     candidates screened, ``route_evaluations`` equilibria of route optimization in
     ``route_s`` seconds, ``time_s`` in all; ``priors`` of the seeds came from
-    a prior design (:class:`PriorLayout`)."""
+    a prior design (:class:`PriorLayout`); ``refit``: the counts whose routes the
+    finer mesh optimized again (:func:`~.converge.converge_front`)."""
 
     layouts: dict[int, Layout] = field(default_factory=dict)
     finished: dict[int, list[Layout]] = field(default_factory=dict)
@@ -144,6 +145,7 @@ class Front:
     route_s: float = 0.0
     time_s: float = 0.0
     priors: int = 0
+    refit: list[int] = field(default_factory=list)
 
     def offer(self, layouts: list[Layout], size: float) -> None:
         """Keep ``layouts`` among the finished of their counts, each distinct one once."""
@@ -155,7 +157,8 @@ class Front:
     def as_json(self) -> dict:
         return {"counts": sorted(self.layouts), "seeds": self.seeds, "priors": self.priors, "pool": self.pool,
                 "evaluations": self.evaluations, "screened": self.screened,
-                "route_evaluations": self.route_evaluations, "route_s": self.route_s, "time_s": self.time_s}
+                "route_evaluations": self.route_evaluations, "route_s": self.route_s, "time_s": self.time_s,
+                "refit": list(self.refit)}
 
 
 def same_route(a: Route, b: Route, size: float, tol: float = SAME_ROUTE) -> bool:
