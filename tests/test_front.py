@@ -344,10 +344,10 @@ def test_a_route_cut_short_is_carried_on_along_its_tangent(searched):
 
 
 def test_worker_processes_find_the_same_front(searched):
-    """With a worker process sharing the finishes, the extensions and the finer
-    mesh's solves (route optimization on: one round), the front, every finished
-    layout and the errors on the finer mesh are those found in one process, to
-    the last bit."""
+    """With a worker process sharing the finishes, the extensions, the finer
+    mesh's solves and its route optimizations (route optimization on: one round),
+    the front, every finished layout, the routes optimized again on the finer
+    mesh and the errors there are those found in one process, to the last bit."""
     import copy
     from dataclasses import replace
 
@@ -360,13 +360,18 @@ def test_worker_processes_find_the_same_front(searched):
 
     def run(workers):
         front = search_front(p, st, p.scene.optimize, greedy, options, "direct", workers=workers)
-        res = converge_front(copy.deepcopy(front), p, st, fine, p.scene.optimize, options, "direct", workers=workers)
-        return front, res
+        converged = copy.deepcopy(front)
+        res = converge_front(converged, p, st, fine, p.scene.optimize, options, "direct", workers=workers)
+        return front, (converged, res)
 
-    alone, alone_fine = run(None)
+    alone, (alone_converged, alone_fine) = run(None)
     with Pool(1) as pool:
-        shared, shared_fine = run(pool)
+        shared, (shared_converged, shared_fine) = run(pool)
         assert pool.broken is None
+    assert alone_converged.refit and shared_converged.refit == alone_converged.refit  # optimized again there
+    for k in alone_converged.layouts:
+        a, b = alone_converged.layouts[k], shared_converged.layouts[k]
+        assert all(np.array_equal(r.control, q.control) for r, q in zip(a.routes, b.routes))
     assert alone.route_evaluations > 0 and shared.route_evaluations == alone.route_evaluations
     assert sorted(shared.layouts) == sorted(alone.layouts)
     for k in alone.layouts:

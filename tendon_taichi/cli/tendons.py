@@ -127,11 +127,12 @@ def add_consolidation_flags(p: argparse.ArgumentParser, budget: bool = True) -> 
 
 def add_front_flags(p: argparse.ArgumentParser) -> None:
     """``--beam`` and ``--no-converge``: how wide the count/error front searches, and
-    whether its errors are re-solved on the next finer mesh."""
+    whether its errors are re-solved (and its routes optimized again) on the next finer mesh."""
     p.add_argument("--beam", type=int, default=BEAM, metavar="B",
                    help=f"layouts kept per tendon count by the front's beam search (default {BEAM})")
     p.add_argument("--no-converge", action="store_true",
-                   help="report the front's errors on the design's mesh, not re-solved on the next finer one")
+                   help="report the front's errors on the design's mesh, not re-solved (and its routes not "
+                        "optimized again) on the next finer one")
 
 
 def front_settings(args) -> dict:

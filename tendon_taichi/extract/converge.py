@@ -125,12 +125,12 @@ def _refit(search: _Search, front: Front, there: dict[int, RealizableResult | No
     tendons 1e-6 L on level 1, 0.40 % of L on level 2 as they are, 1e-6 L there once
     optimized again); the finer mesh's fit is nearer the body's. The search's workers
     share the optimizations."""
-    fine_search = _Search(fine, fine_state, search.settings, search.solver, search.options, search.rs, "front",
-                          search.log)
-    fine_search.out, fine_search.workers = search.out, search.workers
     counts = [k for k in sorted(front.layouts) if there[k] is not None and front.layouts[k].routes]
     if not counts or not search.options.refine:
         return
+    fine_search = _Search(fine, fine_state, search.settings, search.solver, search.options, search.rs, "front",
+                          search.log)
+    fine_search.out, fine_search.workers = search.out, search.workers
     search.log(f"front: the routes of {len(counts)} layout(s) optimized again on the finer mesh")
     starts = [Layout(front.layouts[k].routes, there[k], fine_search.cost(front.layouts[k].routes,
                                                                         there[k].pose_error_rel),
