@@ -30,7 +30,7 @@ def test_every_script_has_a_test():
     tested = {"simulate_levels.py", "how_it_works/make_figure.py", "planted/make_suite.py", "planted/reextract.py",
               "planted/counts_by_level.py", "sweeps/dask_overhead.py", "bench/make_bench.py",
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
-              "realizable_side_by_side.py"}
+              "realizable_side_by_side.py", "planted/held_out.py"}
     assert scripts == tested
 
 
@@ -118,6 +118,23 @@ def test_reextract_reproduces_the_run(planted_results, tmp_path):
     (before,), (after,) = json.loads(src.read_text())["cases"], json.loads((tmp_path / "re.json").read_text())["cases"]
     for key in ("count", "best", "realizable_pose_error_rel", "kinks", "capstan_worst", "passed"):
         assert after[key] == before[key], key
+
+
+def test_held_out_solves_each_front_entry_on_a_finer_mesh(planted_results):
+    """Each front entry up to planted + 1 tendons, solved on the next mesh up: the
+    error reported is the run's (level 1: the run had --no-converge), the one there
+    is finite and differs from it (another mesh), and the summary counts them."""
+    src = planted_results / "runs" / "r1"
+    (case,) = json.loads((src / "planted_bench.json").read_text())["cases"]
+    out = run(BENCH / "planted" / "held_out.py", src, "--above", 1).stdout.splitlines()
+    front = [e for e in case["front"] if e["count"] <= case["planted_count"] + 1]
+    assert len(out) == len(front) + 1 and out[-1].startswith(f"level 1: {len(front)} entries")
+    for line, e in zip(out, front):
+        words = line.split()
+        assert words[0] == case["case"] and words[1] == f"k={e['count']}"
+        reported, there = float(words[3].rstrip("%")), float(words[5].rstrip("%"))
+        assert reported == pytest.approx(100 * e["realizable_pose_error_rel"], abs=1e-4)
+        assert np.isfinite(there) and there != reported
 
 
 def test_counts_by_level_tables_the_runs(planted_results):
