@@ -223,8 +223,10 @@ def _describe_optimize(res: dict) -> str:
 def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int = 3,
               out_dir: str | Path = "recordings/bench", optimize_levels: list[int] | None = None,
               forward_max_fibers: int = 2500, progress=None, optimize_solver: str = "each",
-              workers: int | None = 0, scheduler: str | None = None) -> dict:
-    """Run the benchmark and write bench.json, bench.csv and bench.png into ``out_dir``.
+              workers: int | None = 0, scheduler: str | None = None,
+              cases_dir: str | Path | None = None) -> dict:
+    """Run the benchmark and write bench.json, bench.csv and bench.png into ``out_dir``
+    (the design pipeline's folders into ``cases_dir``, default ``out_dir``).
 
     ``optimize_solver``: ``each`` runs the whole optimization with every measured
     solver; ``auto`` once per level, with the backend that ``--solver auto`` picks
@@ -255,7 +257,8 @@ def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int =
             if level in optimize_levels and optimize_here:
                 jobs.append((fig, Task(case_id({"kind": "bench", "scene": scene.source, "level": level,
                                                 "solver": solver}),
-                                       f"level {level} {solver}", optimize_case, (scene, level, solver, str(out_dir)))))
+                                       f"level {level} {solver}", optimize_case,
+                                       (scene, level, solver, str(cases_dir or out_dir)))))
         entry["baseline_gradient_s"] = measure_baseline(p, repeat, progress)
         entry["gradient_speedup"] = speedups(entry)
         rows.append(entry)
