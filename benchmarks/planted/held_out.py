@@ -39,7 +39,8 @@ def held_out(case: dict, above: int) -> list[tuple[int, float, float]]:
     far = build_problem(problem.scene, problem.level + above)
     state = pose_only_state(far)
     out = []
-    for entry, layout in zip(design["front"], read_prior(recording.parent, problem.scene).layouts):
+    entries = [e for e in design["front"] if e.get("routes")]  # those read_prior makes layouts of, in order
+    for entry, layout in zip(entries, read_prior(recording.parent, problem.scene).layouts):
         if entry["count"] > case["planted_count"] + 1:
             break
         try:
