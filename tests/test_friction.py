@@ -196,3 +196,32 @@ def test_frictional_gradient_and_sensitivities_match_finite_differences(solver):
     for j, e in enumerate(np.eye(2)):
         fd = (targets(r + h * e) - targets(r - h * e)) / (2 * h)
         assert np.linalg.norm(J[..., j] - fd) <= 1e-6 * np.linalg.norm(fd)
+
+
+@pytest.mark.parametrize("solver", ["direct", "cg"])
+def test_sensitivities_prepare_the_hessian_once(solver):
+    """The sensitivities of every tendon share one preparation (factorization) of H
+    and equal those solved one by one, each with H prepared anew."""
+    from tendon_taichi.optimizer.soft_ik import ADJOINT_TOL
+    from tendon_taichi.solve.frictional import solve_jacobian
+
+    p = build_problem(load_scene("t_shape"), 1)
+    cables = CableSet.polylines(p.mesh, _t_shape_paths(), 50.0, friction=0.3)
+    ik = SoftIK(p, p.scene.optimize, solver, cables=cables)
+    ik.evaluate(np.array([0.08, 0.05]))
+    ps = ik.poses[0]
+    rhs = [ps.model.mixed_product(cables.a0[j] * np.eye(1, 2, j).ravel()) for j in range(2)]
+    for b in rhs:
+        b[p.fixed] = 0.0
+    alone = [solve_jacobian(ps.linear, ps.model.friction_jacobian(), b, ADJOINT_TOL, transpose=False) for b in rhs]
+    prepared, solve = [0], ps.linear.solve
+
+    def counted(*args, **kwargs):
+        prepared[0] += kwargs.get("prepare", True)
+        return solve(*args, **kwargs)
+
+    ps.linear.solve = counted
+    shared = list(ps.sensitivities(iter(rhs)))
+    assert prepared[0] == 1
+    for a, s in zip(alone, shared):
+        assert np.linalg.norm(s - a) <= 1e-8 * np.linalg.norm(a)

@@ -158,13 +158,14 @@ class PoseSolve:
         return lam
 
     def sensitivities(self, rhs, tol: float = ADJOINT_TOL):
-        """J^-1 b (n, 2) for each b (n, 2) of ``rhs``, at the last equilibrium."""
+        """J^-1 b (n, 2) for each b (n, 2) of ``rhs``, at the last equilibrium, H
+        prepared (factorized) once for all of them."""
         fj = self.model.friction_jacobian()
         if fj is None:
             yield from self.linear.solve_many(rhs, tol)
             return
-        for b in rhs:
-            yield solve_jacobian(self.linear, fj, b, tol, transpose=False)
+        for j, b in enumerate(rhs):
+            yield solve_jacobian(self.linear, fj, b, tol, transpose=False, prepare=j == 0)
 
 
 class SoftIK:

@@ -25,13 +25,16 @@ MAX_ITERATIONS = 200
 
 
 def solve_jacobian(linear: LinearSolver, friction: FrictionJacobian | None, rhs: np.ndarray, tol: float,
-                   transpose: bool, warm: bool = False) -> np.ndarray:
+                   transpose: bool, warm: bool = False, prepare: bool = True) -> np.ndarray:
     """y (n, 2) with ``J y = rhs`` (``transpose``: ``J^T y = rhs``) on the free DOFs,
     ``J = H + E`` at the model's current state (``friction`` None: ``J = H``, one
     plain solve, ``warm`` as the backend takes it); ``tol`` relative to |rhs|.
-    Raises ConvergenceError when GMRES does not reach it."""
+    ``prepare=False``: H as the backend last prepared it (its factorization or
+    preconditioner, :meth:`~.linear.LinearSolver.resolve`), for another
+    right-hand side at the same state. Raises ConvergenceError when GMRES does
+    not reach it."""
     if friction is None:
-        return linear.solve(rhs, tol=tol, warm=warm)
+        return linear.solve(rhs, tol=tol, warm=warm) if prepare else linear.resolve(rhs, tol)
     n2 = np.asarray(rhs).size
     mask = np.repeat(friction.pm.free[:, 0] > 0, 2)  # the free DOFs
     apply_E = friction.transpose_product if transpose else friction.product
@@ -40,7 +43,7 @@ def solve_jacobian(linear: LinearSolver, friction: FrictionJacobian | None, rhs:
     def h_solve(v: np.ndarray) -> np.ndarray:
         return linear.resolve(v.reshape(-1, 2), inner).ravel()
 
-    y0 = linear.solve(rhs, tol=inner).ravel()
+    y0 = (linear.solve(rhs, tol=inner) if prepare else linear.resolve(rhs, inner)).ravel()
 
     def matvec(z: np.ndarray) -> np.ndarray:
         full = np.zeros(n2)
