@@ -16,7 +16,8 @@ elements' - is computed once per mesh and shared by every tendon layout."""
 from __future__ import annotations
 
 import weakref
-from dataclasses import dataclass
+from collections import OrderedDict
+from dataclasses import dataclass, replace
 from typing import Iterable, Iterator
 
 import numpy as np
@@ -127,6 +128,12 @@ _ELEMENT_PATTERN: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 #: forth across the same triangle edges while its route is optimized)
 PATTERNS_KEPT = 4
 
+#: per mesh, the last tendon patterns made by any direct solver of it, by their
+#: free DOFs, ordering and cable structure (without factors): the poses of one
+#: robot, and the many robots a design solves of the same few routes, share them
+_SHARED_PATTERNS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+PATTERNS_SHARED = 32
+
 
 @dataclass
 class _ElementPattern:
@@ -191,13 +198,25 @@ class DirectSolver(LinearSolver):
         self.sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)  # (S, 12)
         self.shape = (int(self.free.sum()),) * 2
         key = self._tri.tobytes() + cab.segments.tobytes()
-        pattern = self._patterns.pop(key, None) or self._pattern()
+        pattern = self._patterns.pop(key, None) or self._shared_pattern(key)
         self._patterns[key] = pattern  # the most recent last
         while len(self._patterns) > PATTERNS_KEPT:
             self._patterns.pop(next(iter(self._patterns)))
         self.pattern = pattern
         self.keep, self.order, self.pos = pattern.keep, pattern.order, pattern.pos
         self.indices, self.indptr, self.nnz = pattern.indices, pattern.indptr, pattern.nnz
+
+    def _shared_pattern(self, key: bytes) -> _Pattern:
+        """The pattern of the cable structure ``key`` as any solver of this mesh last
+        made it (:data:`_SHARED_PATTERNS`), else made here; with no factors (each
+        solver factorizes into its own)."""
+        shared = _SHARED_PATTERNS.setdefault(self.model.mesh, OrderedDict())
+        full = (self.free.tobytes(), self.ordered, self.model.single, key)
+        made = shared.pop(full, None) or self._pattern()
+        shared[full] = made  # the most recent last
+        while len(shared) > PATTERNS_SHARED:
+            shared.popitem(last=False)
+        return replace(made, ldl=None)
 
     def _pattern(self) -> _Pattern:
         """The pattern of the element and segment entries (``self.sdofs``)."""
