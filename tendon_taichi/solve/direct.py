@@ -131,8 +131,9 @@ PATTERNS_KEPT = 4
 #: per mesh, the last tendon patterns made by any direct solver of it, by their
 #: free DOFs, ordering and cable structure (without factors): the poses of one
 #: robot, and the many robots a design solves of the same few routes, share them
+#: (a fiber lattice's pattern is not kept: few solvers make it, and it is large)
 _SHARED_PATTERNS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-PATTERNS_SHARED = 32
+PATTERNS_SHARED = 8
 
 
 @dataclass
@@ -210,6 +211,8 @@ class DirectSolver(LinearSolver):
         """The pattern of the cable structure ``key`` as any solver of this mesh last
         made it (:data:`_SHARED_PATTERNS`), else made here; with no factors (each
         solver factorizes into its own)."""
+        if self.model.single:  # the fiber lattice
+            return self._pattern()
         shared = _SHARED_PATTERNS.setdefault(self.model.mesh, OrderedDict())
         full = (self.free.tobytes(), self.ordered, self.model.single, key)
         made = shared.pop(full, None) or self._pattern()
