@@ -214,7 +214,7 @@ class DirectSolver(LinearSolver):
         if self.model.single:  # the fiber lattice
             return self._pattern()
         shared = _SHARED_PATTERNS.setdefault(self.model.mesh, OrderedDict())
-        full = (self.free.tobytes(), self.ordered, self.model.single, key)
+        full = (self.free.tobytes(), self.ordered, key)
         made = shared.pop(full, None) or self._pattern()
         shared[full] = made  # the most recent last
         while len(shared) > PATTERNS_SHARED:
