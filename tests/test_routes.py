@@ -256,7 +256,6 @@ def test_robots_of_the_same_cables_share_their_pattern_not_their_factors():
     """A second robot of the same cables on the same mesh takes the sparsity pattern
     the first one made (no new analysis), factorizes into factors of its own, and
     evaluates bit for bit as a robot whose pattern was made anew."""
-    from tendon_taichi.optimizer.soft_ik import SoftIK
     from tendon_taichi.solve import direct
 
     p, obj, z0 = _arm_objective()
@@ -269,10 +268,5 @@ def test_robots_of_the_same_cables_share_their_pattern_not_their_factors():
     assert taken.pattern is not made.pattern and taken.pattern.pos is made.pattern.pos
     assert taken.ldl is not None and taken.ldl is not made.ldl
     direct._SHARED_PATTERNS.clear()
-    anew = SoftIK(p, p.scene.optimize, "direct", cables=obj.ik.model.cables)
-    assert anew.poses[0].linear.pattern.pos is not made.pattern.pos
-    anew.eval_tol = obj.ik.eval_tol
-    for ps, x in zip(anew.poses, start):
-        ps.model.set_positions(x)
-    f, g = anew.evaluate(obj.unpack(z0)[1].ravel())
-    assert f == obj.ik.last_value() and np.array_equal(g, obj.ik._last[2])
+    same, anew = _as_a_new_robot(p, obj, z0, start)
+    assert same and anew.poses[0].linear.pattern.pos is not made.pattern.pos

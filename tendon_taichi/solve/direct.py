@@ -16,7 +16,6 @@ elements' - is computed once per mesh and shared by every tendon layout."""
 from __future__ import annotations
 
 import weakref
-from collections import OrderedDict
 from dataclasses import dataclass, replace
 from typing import Iterable, Iterator
 
@@ -199,10 +198,7 @@ class DirectSolver(LinearSolver):
         self.sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)  # (S, 12)
         self.shape = (int(self.free.sum()),) * 2
         key = self._tri.tobytes() + cab.segments.tobytes()
-        pattern = self._patterns.pop(key, None) or self._shared_pattern(key)
-        self._patterns[key] = pattern  # the most recent last
-        while len(self._patterns) > PATTERNS_KEPT:
-            self._patterns.pop(next(iter(self._patterns)))
+        pattern = _recent(self._patterns, key, lambda: self._shared_pattern(key), PATTERNS_KEPT)
         self.pattern = pattern
         self.keep, self.order, self.pos = pattern.keep, pattern.order, pattern.pos
         self.indices, self.indptr, self.nnz = pattern.indices, pattern.indptr, pattern.nnz
@@ -213,12 +209,8 @@ class DirectSolver(LinearSolver):
         solver factorizes into its own)."""
         if self.model.single:  # the fiber lattice
             return self._pattern()
-        shared = _SHARED_PATTERNS.setdefault(self.model.mesh, OrderedDict())
-        full = (self.free.tobytes(), self.ordered, key)
-        made = shared.pop(full, None) or self._pattern()
-        shared[full] = made  # the most recent last
-        while len(shared) > PATTERNS_SHARED:
-            shared.popitem(last=False)
+        shared = _SHARED_PATTERNS.setdefault(self.model.mesh, {})
+        made = _recent(shared, (self.free.tobytes(), self.ordered, key), self._pattern, PATTERNS_SHARED)
         return replace(made, ldl=None)
 
     def _pattern(self) -> _Pattern:
@@ -402,6 +394,16 @@ class DirectSolver(LinearSolver):
         factorization (one triangular solve each)."""
         for j, b in enumerate(rhs):
             yield self.solve(b, tol=tol) if j == 0 else self.resolve(b)
+
+
+def _recent(cache: dict, key, make, keep: int):
+    """``cache[key]`` (``make()`` where it is absent), now the most recent entry of
+    ``cache``, which keeps its last ``keep`` entries (insertion order: oldest first)."""
+    value = cache.pop(key, None) or make()
+    cache[key] = value
+    while len(cache) > keep:
+        cache.pop(next(iter(cache)))
+    return value
 
 
 def _merged(elements: _ElementPattern, seg_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
