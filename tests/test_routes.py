@@ -215,12 +215,15 @@ def _as_a_new_robot(p, obj, z, start):
     return same and all(np.array_equal(u, v) for u, v in zip(ik.adjoints, fresh.adjoints)), fresh
 
 
-def test_a_route_moved_across_triangles_gives_what_a_new_robot_gives():
+def test_a_route_moved_across_triangles_gives_what_a_new_robot_gives(monkeypatch):
     """Route optimization keeps its robot when a step moves waypoints into other
     triangles (the cables' incidences, the sparsity pattern and the capstan
     weights are rebuilt in place): the soft IK's objective, gradient and adjoints
     there are bit for bit those of a new robot of the same cables started from
-    the same equilibria."""
+    the same equilibria (which start Newton with a fresh factorization)."""
+    from tendon_taichi.solve.direct import DirectSolver
+
+    monkeypatch.setattr(DirectSolver, "chord_across_moves", False)
     p, obj, z0 = _arm_objective()
     obj.evaluate(z0)
     ik, tri0, start = obj.ik, obj.ik.model.cables.points.tri.copy(), [x.copy() for x in obj.positions]
@@ -234,10 +237,14 @@ def test_a_route_moved_across_triangles_gives_what_a_new_robot_gives():
     assert same
 
 
-def test_a_route_moved_back_reuses_its_earlier_pattern():
+def test_a_route_moved_back_reuses_its_earlier_pattern(monkeypatch):
     """A step back into the triangles of an earlier step takes that step's sparsity
     pattern and LDL^T analysis again (no new ones), and the evaluation there is bit
-    for bit a new robot's of the same cables from the same equilibria."""
+    for bit a new robot's of the same cables from the same equilibria (Newton
+    started with a fresh factorization)."""
+    from tendon_taichi.solve.direct import DirectSolver
+
+    monkeypatch.setattr(DirectSolver, "chord_across_moves", False)
     p, obj, z0 = _arm_objective()
     obj.evaluate(z0)
     linear = obj.ik.poses[0].linear
@@ -250,6 +257,48 @@ def test_a_route_moved_back_reuses_its_earlier_pattern():
     obj.evaluate(z0)
     assert linear.pattern is first and linear.ldl is ldl and ldl is not None
     assert _as_a_new_robot(p, obj, z0, start)[0]
+
+
+def _route_step():
+    """The arm's objective evaluated at z0, then one step on (every control point 3 mm
+    down, into other triangles); the objective, z1, the equilibria z1 started from
+    and the fresh factorizations the step took (first pose)."""
+    p, obj, z0 = _arm_objective()
+    obj.evaluate(z0)
+    start = [x.copy() for x in obj.positions]
+    lin = obj.ik.poses[0].linear
+    solves = lin.stats.solves
+    z1 = z0.copy()
+    z1[1:obj.n_control:2] -= 0.003 / p.size
+    obj.evaluate(z1)
+    return p, obj, z1, start, lin.stats.solves - solves
+
+
+def test_a_moved_route_starts_newton_from_the_last_factorization(monkeypatch):
+    """After a route step (cables moved) Newton starts with chord steps on the last
+    equilibrium's factorization instead of factorizing anew - fewer fresh
+    factorizations than when the move forgets it - and reaches the equilibrium,
+    objective and gradient of a new robot of the same cables solved to a far
+    tighter tolerance (1e-13), as closely as the evaluation's tolerance allows."""
+    from tendon_taichi.optimizer.soft_ik import SoftIK
+    from tendon_taichi.solve.direct import DirectSolver
+
+    p, obj, z1, start, chord = _route_step()
+    with monkeypatch.context() as m:
+        m.setattr(DirectSolver, "chord_across_moves", False)
+        forgetting = _route_step()[4]
+    assert chord < forgetting
+    ik = obj.ik
+    tight = SoftIK(p, p.scene.optimize, "direct", cables=ik.model.cables)
+    tight.eval_tol = 1e-13
+    for ps, x in zip(tight.poses, start):
+        ps.model.set_positions(x)
+    f, g = tight.evaluate(obj.unpack(z1)[1].ravel())
+    for a, b in zip(ik.poses, tight.poses):
+        assert np.sqrt(a.model.gradient_norm2()) <= ik.eval_tol * a.newton.force_scale
+        assert np.abs(a.model.positions() - b.model.positions()).max() < 1e-7 * p.size
+    assert abs(ik.last_value() - f) <= 1e-6 * abs(f)
+    assert np.abs(ik._last[2] - g).max() <= 1e-4 * np.abs(g).max()
 
 
 def test_robots_of_the_same_cables_share_their_pattern_not_their_factors():

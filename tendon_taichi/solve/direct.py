@@ -178,6 +178,12 @@ class DirectSolver(LinearSolver):
 
     name = "direct"
 
+    #: keep the last factorization for Newton's chord steps when the cables move (a
+    #: route's small step barely changes the Hessian, and Newton's chord test refreshes
+    #: it when it stops contracting); False forgets it, so that a robot whose cables
+    #: moved solves bit for bit as a new robot of the same cables would
+    chord_across_moves = True
+
     def __init__(self, model: Model, ordered: bool = True):
         self.model = model
         self.stats = LinearStats()
@@ -247,12 +253,14 @@ class DirectSolver(LinearSolver):
         """The model's cables moved (:meth:`~tendon_taichi.physics.model.Model.move_cables`):
         new barycentric weights, and where a point moved to another triangle a new
         sparsity pattern (one of the last few again where it was one of theirs);
-        the last factorization is forgotten."""
+        the last factorization stays, a nearby state's for chord steps
+        (:attr:`chord_across_moves`)."""
         if np.array_equal(self.model.cables.points.tri, self._tri):
             self.seg_coef = _segment_coefficients(self.model.cables)
         else:
             self._build_structure()
-        self.reset()
+        if not self.chord_across_moves:
+            self.reset()
 
     def _element_pattern(self, free_index: np.ndarray, nf: int, tendons: bool) -> _ElementPattern:
         """The elements' part of the pattern (``free_index``: each DOF's index among
