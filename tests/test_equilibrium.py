@@ -201,18 +201,31 @@ def test_large_contraction_keeps_triangles_valid():
     assert eq.residual <= 1e-10
 
 
-def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu():
+def _cholesky(monkeypatch, name):
+    """Make the direct backend factorize with ``name`` ("qdldl" or "pardiso", skipped
+    where MKL is not installed) at every size; its class."""
+    from tendon_taichi.solve import direct, pardiso
+
+    if name == "pardiso" and not pardiso.available():
+        pytest.skip("MKL PARDISO is not installed (the mkl extra)")
+    monkeypatch.setattr(direct, "PARDISO_MIN_DOFS", 0 if name == "pardiso" else 10**9)
+    return pardiso.PardisoLDL if name == "pardiso" else direct.LDL
+
+
+@pytest.mark.parametrize("cholesky", ["qdldl", "pardiso"])
+def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu(monkeypatch, cholesky):
     """At a stable equilibrium the Hessian is positive definite and factorized by
-    LDL^T (its symbolic analysis kept for the next); shifted to be indefinite it
-    is factorized by SuperLU; both solve their own matrix, and a factorization
-    still solves its own matrix after a newer one of the same pattern replaced the
-    shared LDL^T factors."""
+    LDL^T or PARDISO's Cholesky (its symbolic analysis kept for the next); shifted
+    to be indefinite it is factorized by SuperLU; both solve their own matrix, and
+    a factorization still solves its own matrix after a newer one of the same
+    pattern replaced the shared factors."""
     from dataclasses import replace
 
     import scipy.sparse as sp
 
     from tendon_taichi.solve.direct import DirectSolver
 
+    kind = _cholesky(monkeypatch, cholesky)
     p = build_problem(load_scene("t_shape"), 1)
     m = Model.from_problem(p)
     NewtonSolver(m, "direct").solve(ac=0.05 * p.fibers.a0, x0=p.mesh.nodes)
@@ -226,7 +239,7 @@ def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu():
         return np.linalg.norm(Hp @ y - b) / np.linalg.norm(b)
 
     spd = d.factorize(H)
-    assert spd.ldl is not None and spd.lu is None and residual(spd, H.Hp) < 1e-10
+    assert isinstance(spd.ldl, kind) and spd.lu is None and residual(spd, H.Hp) < 1e-10
     lowest = sp.linalg.eigsh(H.Hp, k=1, sigma=0, which="LM", return_eigenvectors=False)[0]
     data = H.Hp.data.copy()  # the same pattern, shifted by twice the lowest eigenvalue: one negative
     data[H.Hp.indices == np.repeat(np.arange(n), np.diff(H.Hp.indptr))] -= 2 * abs(lowest)
@@ -236,6 +249,29 @@ def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu():
     again = d.factorize(replace(H, Hp=sp.csc_matrix((2.0 * H.Hp.data, H.Hp.indices, H.Hp.indptr))))
     assert again.ldl is spd.ldl  # the same symbolic analysis, new numbers
     assert residual(again, 2.0 * H.Hp) < 1e-10 and residual(spd, H.Hp) < 1e-10  # spd made its own copy
+
+
+def test_pardiso_solves_as_qdldl_does_and_the_same_every_time(monkeypatch):
+    """The soft IK's objective and adjoint gradient at level 1 with PARDISO's
+    Cholesky agree with qdldl's LDL^T to round-off, and two runs with PARDISO
+    agree to the bit (one thread: reproducible)."""
+    from tendon_taichi.optimizer.soft_ik import SoftIK
+
+    p = build_problem(load_scene("t_shape"), 1)
+    r = np.random.default_rng(1).uniform(0.02, 0.08, p.fibers.n_fibers)
+
+    def gradient(name):
+        with monkeypatch.context() as m:
+            kind = _cholesky(m, name)
+            ik = SoftIK(p, p.scene.optimize, "direct")
+            ik.restart(r)
+            out = ik.evaluate(r)
+            assert isinstance(ik.linear.ldl, kind)
+        return out
+
+    (f0, g0), (f1, g1), (f2, g2) = gradient("qdldl"), gradient("pardiso"), gradient("pardiso")
+    assert abs(f1 - f0) <= 1e-10 * abs(f0) and np.abs(g1 - g0).max() <= 1e-8 * np.abs(g0).max()
+    assert f1 == f2 and np.array_equal(g1, g2)
 
 
 def test_a_tendon_robots_sparse_hessian_holds_every_entry_once():

@@ -1,10 +1,12 @@
 """The direct backend: the model's Hessian assembled as a scipy sparse matrix on
 the free DOFs and factorized, with a fill-reducing ordering computed once per
 sparsity pattern: by LDL^T (qdldl, its symbolic analysis once per pattern and
-only the numbers afterwards) where the matrix is positive definite - at and
-near a stable equilibrium, almost always - and by SuperLU with pivoting where
-it is not (an LDL^T with a pivot <= 0 proves it: by Sylvester's law of inertia
-D has as many negative entries as the matrix has negative eigenvalues).
+only the numbers afterwards; from ``PARDISO_MIN_DOFS`` free DOFs on, where MKL
+is installed, by PARDISO's supernodal Cholesky instead: :mod:`.pardiso`) where
+the matrix is positive definite - at and near a stable equilibrium, almost
+always - and by SuperLU with pivoting where it is not (an LDL^T with a pivot
+<= 0 proves it: by Sylvester's law of inertia D has as many negative entries as
+the matrix has negative eigenvalues).
 
 A many-segment cable (a tendon) couples every node along it through its axial
 stiffness ``kc g g^T`` (``g = dL/dx``, ``L`` its weighted length): a dense
@@ -28,6 +30,8 @@ from ..errors import ConvergenceError
 from ..physics.model import Model
 from ._newton_kernels import direction_from
 from .linear import LinearSolver, LinearStats
+from .pardiso import PARDISO_MIN_DOFS, PardisoLDL
+from .pardiso import available as pardiso_available
 
 
 @dataclass
@@ -73,6 +77,10 @@ class LDL:
         self.generation += 1
         return bool(np.all(self.solver.factors()[1] > 0.0))
 
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """A^-1 b with the current factorization, b (n,)."""
+        return self.solver.solve(b)
+
 
 class Factorization:
     """A factorization of an :class:`Assembled` Hessian's sparse part - LDL^T
@@ -101,10 +109,10 @@ class Factorization:
         if self.lu is not None:
             return self.lu.solve(b)
         if self.ldl.generation != self.generation:  # the shared factors moved on: factorize a copy of its own
-            own = LDL(self.Hp.indptr, self.Hp.indices, self.Hp.shape[0])
+            own = type(self.ldl)(self.Hp.indptr, self.Hp.indices, self.Hp.shape[0])
             own.factor(self.Hp.data)
             self.ldl, self.generation = own, own.generation
-        return self.ldl.solver.solve(b)
+        return self.ldl.solve(b)
 
     def solve_ordered(self, bp: np.ndarray) -> np.ndarray:
         y = self._sparse_solve(bp)
@@ -325,7 +333,9 @@ class DirectSolver(LinearSolver):
     def factorize(self, H: Assembled) -> Factorization:
         """Factorize an ordered Hessian (:meth:`assemble_ordered`)."""
         if self.pattern.ldl is None:
-            self.pattern.ldl = LDL(self.indptr, self.indices, self.shape[0])
+            n = self.shape[0]
+            cholesky = PardisoLDL if n >= PARDISO_MIN_DOFS and pardiso_available() else LDL
+            self.pattern.ldl = cholesky(self.indptr, self.indices, n)
         return Factorization(H, self.order, self.pattern.ldl)
 
     def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:
