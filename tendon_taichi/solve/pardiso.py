@@ -121,6 +121,13 @@ class PardisoLDL:
             raise np.linalg.LinAlgError(f"PARDISO solve failed (error {err})")
         return x
 
+    def __getstate__(self) -> dict:
+        """A copy (pickled) has no PARDISO handle: it analyzes again with its first
+        factorization, and a factorization holding it factorizes a copy first."""
+        state = dict(self.__dict__)
+        state.update(_pt=np.zeros(64, dtype=np.int64), _analyzed=False, generation=-1)
+        return state
+
     def __del__(self):
         if self._analyzed and _lib.get("pardiso") is not None:
             try:
