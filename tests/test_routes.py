@@ -261,8 +261,8 @@ def test_a_route_moved_back_reuses_its_earlier_pattern(monkeypatch):
 
 def _route_step():
     """The arm's objective evaluated at z0, then one step on (every control point 3 mm
-    down, into other triangles); the objective, z1, the equilibria z1 started from
-    and the fresh factorizations the step took (first pose)."""
+    down, into other triangles); the problem, the objective, z1, the equilibria z1
+    started from and the fresh factorizations the step took (first pose)."""
     p, obj, z0 = _arm_objective()
     obj.evaluate(z0)
     start = [x.copy() for x in obj.positions]
