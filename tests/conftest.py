@@ -39,6 +39,17 @@ def rng():
     return np.random.default_rng(12345)
 
 
+def use_cholesky(monkeypatch, name: str):
+    """Make the direct backend factorize with ``name`` ("qdldl" or "pardiso", the test
+    skipped where MKL is not installed) at every size; its class."""
+    from tendon_taichi.solve import direct, pardiso
+
+    if name == "pardiso" and not pardiso.available():
+        pytest.skip("MKL PARDISO is not installed (the mkl extra)")
+    monkeypatch.setattr(direct, "PARDISO_MIN_DOFS", 0 if name == "pardiso" else 10**9)
+    return pardiso.PardisoLDL if name == "pardiso" else direct.LDL
+
+
 def small_scene_toml(seed: int, extra: str = "") -> str:
     """A random star-shaped polygon body, clamped on its lowest part, with one target."""
     r = np.random.default_rng(seed)

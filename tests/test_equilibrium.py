@@ -3,7 +3,7 @@ Newton iteration counts, determinism, and clear non-convergence."""
 
 import numpy as np
 import pytest
-from conftest import small_scene_toml
+from conftest import small_scene_toml, use_cholesky
 from reference import body_forces, fiber_forces, gravity_forces
 
 from tendon_taichi import (ConvergenceError, Model, NewtonSolver, build_problem, load_scene,
@@ -201,17 +201,6 @@ def test_large_contraction_keeps_triangles_valid():
     assert eq.residual <= 1e-10
 
 
-def _cholesky(monkeypatch, name):
-    """Make the direct backend factorize with ``name`` ("qdldl" or "pardiso", skipped
-    where MKL is not installed) at every size; its class."""
-    from tendon_taichi.solve import direct, pardiso
-
-    if name == "pardiso" and not pardiso.available():
-        pytest.skip("MKL PARDISO is not installed (the mkl extra)")
-    monkeypatch.setattr(direct, "PARDISO_MIN_DOFS", 0 if name == "pardiso" else 10**9)
-    return pardiso.PardisoLDL if name == "pardiso" else direct.LDL
-
-
 @pytest.mark.parametrize("cholesky", ["qdldl", "pardiso"])
 def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu(monkeypatch, cholesky):
     """At a stable equilibrium the Hessian is positive definite and factorized by
@@ -225,7 +214,7 @@ def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu(monkeyp
 
     from tendon_taichi.solve.direct import DirectSolver
 
-    kind = _cholesky(monkeypatch, cholesky)
+    kind = use_cholesky(monkeypatch, cholesky)
     p = build_problem(load_scene("t_shape"), 1)
     m = Model.from_problem(p)
     NewtonSolver(m, "direct").solve(ac=0.05 * p.fibers.a0, x0=p.mesh.nodes)
@@ -262,7 +251,7 @@ def test_pardiso_solves_as_qdldl_does_and_the_same_every_time(monkeypatch):
 
     def gradient(name):
         with monkeypatch.context() as m:
-            kind = _cholesky(m, name)
+            kind = use_cholesky(m, name)
             ik = SoftIK(p, p.scene.optimize, "direct")
             ik.restart(r)
             out = ik.evaluate(r)

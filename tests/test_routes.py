@@ -301,6 +301,23 @@ def test_a_moved_route_starts_newton_from_the_last_factorization(monkeypatch):
     assert np.abs(ik._last[2] - g).max() <= 1e-4 * np.abs(g).max()
 
 
+def test_a_tendon_robot_solves_with_pardiso_as_with_qdldl(monkeypatch):
+    """A route step (cables moved, chord steps, friction's GMRES, the tendon's
+    Woodbury term) evaluates to the same objective and gradient, to round-off,
+    whether the direct backend factorizes with qdldl or with PARDISO."""
+    from conftest import use_cholesky
+
+    out = []
+    for name in ("qdldl", "pardiso"):
+        with monkeypatch.context() as m:
+            kind = use_cholesky(m, name)
+            obj = _route_step()[1]
+            assert isinstance(obj.ik.poses[0].linear.ldl, kind)
+            out.append((obj.ik.last_value(), obj.ik._last[2]))
+    (f0, g0), (f1, g1) = out
+    assert abs(f1 - f0) <= 1e-10 * abs(f0) and np.abs(g1 - g0).max() <= 1e-7 * np.abs(g0).max()
+
+
 def test_robots_of_the_same_cables_share_their_pattern_not_their_factors():
     """A second robot of the same cables on the same mesh takes the sparsity pattern
     the first one made (no new analysis), factorizes into factors of its own, and
