@@ -28,6 +28,7 @@ import scipy.sparse.linalg as spla
 
 from ..errors import ConvergenceError
 from ..physics.model import Model
+from ._csc import triangle
 from ._newton_kernels import direction_from
 from .linear import LinearSolver, LinearStats
 from .pardiso import PARDISO_MIN_DOFS, PardisoLDL
@@ -58,10 +59,7 @@ class LDL:
     (``generation`` counts them)."""
 
     def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int):
-        col = np.repeat(np.arange(n), np.diff(indptr))
-        self.upper = indices <= col  # the upper triangle, in the pattern's order
-        self.indices = indices[self.upper]
-        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(col[self.upper], minlength=n))]).astype(np.int32)
+        self.upper, self.indices, self.indptr = triangle(indptr, indices, n)
         self.n = n
         self.solver = None
         self.generation = 0
@@ -84,11 +82,12 @@ class LDL:
 
 class Factorization:
     """A factorization of an :class:`Assembled` Hessian's sparse part - LDL^T
-    (``ldl``, an :class:`LDL` of its pattern) where it is positive definite, else
+    (``ldl``, an :class:`LDL` of its pattern, or a
+    :class:`~tendon_taichi.solve.pardiso.PardisoLDL`) where it is positive definite, else
     SuperLU - with the low-rank part by Woodbury's identity; :meth:`solve` works
     in the free-DOF numbering (``order`` maps it to the ordered one)."""
 
-    def __init__(self, H: Assembled, order: np.ndarray, ldl: LDL | None = None):
+    def __init__(self, H: Assembled, order: np.ndarray, ldl: LDL | PardisoLDL | None = None):
         self.Hp, self.ldl, self.lu = H.Hp, None, None
         if ldl is not None and H.Hp.shape[0] and ldl.factor(H.Hp.data):
             self.ldl, self.generation = ldl, ldl.generation

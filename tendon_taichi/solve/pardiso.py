@@ -29,6 +29,8 @@ from ctypes.util import find_library
 
 import numpy as np
 
+from ._csc import triangle
+
 #: the direct backend factorizes with PARDISO from this many free DOFs on (where it loads):
 #: level 5 and up of every built-in scene (level 4 has 3334-5952 free DOFs)
 PARDISO_MIN_DOFS = 6000
@@ -73,11 +75,9 @@ class PardisoLDL:
     is current at a time (``generation`` counts them)."""
 
     def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int):
-        col = np.repeat(np.arange(n), np.diff(indptr))
         # the lower triangle by columns is the upper triangle by rows, as PARDISO takes it
-        self.lower = indices >= col
-        self.ja = np.ascontiguousarray(indices[self.lower], dtype=np.int32)
-        self.ia = np.concatenate([[0], np.cumsum(np.bincount(col[self.lower], minlength=n))]).astype(np.int32)
+        self.lower, ja, self.ia = triangle(indptr, indices, n, lower=True)
+        self.ja = np.ascontiguousarray(ja, dtype=np.int32)
         self.n = n
         self.generation = 0
         self._pt = np.zeros(64, dtype=np.int64)

@@ -1,0 +1,13 @@
+"""A sparsity-pattern helper of this layer's factorizations (:mod:`.direct`, :mod:`.pardiso`)."""
+
+import numpy as np
+
+
+def triangle(indptr: np.ndarray, indices: np.ndarray, n: int, lower: bool = False):
+    """The upper (``lower``: lower) triangle of an n x n CSC pattern: which of its
+    entries lie there (mask, in the pattern's order), their row indices and the
+    triangle's column pointers (int32)."""
+    col = np.repeat(np.arange(n), np.diff(indptr))
+    keep = indices >= col if lower else indices <= col
+    pointers = np.concatenate([[0], np.cumsum(np.bincount(col[keep], minlength=n))]).astype(np.int32)
+    return keep, indices[keep], pointers
