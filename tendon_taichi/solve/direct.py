@@ -1,8 +1,8 @@
 """The direct backend: the model's Hessian assembled as a scipy sparse matrix on
 the free DOFs and factorized, with a fill-reducing ordering computed once per
 sparsity pattern: by LDL^T (qdldl, its symbolic analysis once per pattern and
-only the numbers afterwards; from ``PARDISO_MIN_DOFS`` free DOFs on, where MKL
-is installed, by PARDISO's supernodal Cholesky instead: :mod:`.pardiso`) where
+only the numbers afterwards; where MKL is installed, by PARDISO's supernodal
+Cholesky instead, in the same order: :mod:`.pardiso`) where
 the matrix is positive definite - at and near a stable equilibrium, almost
 always - and by SuperLU with pivoting where it is not (an LDL^T with a pivot
 <= 0 proves it: by Sylvester's law of inertia D has as many negative entries as

@@ -1,19 +1,22 @@
-"""Intel MKL PARDISO's sparse Cholesky factorization, for the direct backend's
-large systems (optional: the ``mkl`` extra; :func:`available` says whether it
-loaded).
+"""Intel MKL PARDISO's sparse Cholesky factorization, the direct backend's
+factorization where it is installed (optional: the ``mkl`` extra;
+:func:`available` says whether it loaded).
 
 PARDISO factorizes a symmetric positive definite matrix (``mtype`` 2) by a
-supernodal Cholesky with a nested-dissection ordering (METIS): dense BLAS-3
-blocks where qdldl's up-looking LDL^T works entry by entry. Its analysis
-(ordering and symbolic factorization) is done once per sparsity pattern, each
-factorization after that computes only the numbers. Measured on t_shape's
-fiber lattice (one thread): one factorization takes 1.7 / 4.5 / 9.9 / 24 ms
-against qdldl's 4.0 / 12.7 / 38 / 115 ms at 2716 / 5336 / 10504 / 20812 DOFs
-(levels 3-6); a tendon robot at level 2 (880 DOFs) factorizes as fast with
-either. The direct backend takes PARDISO from :data:`PARDISO_MIN_DOFS` free DOFs
-on (level 5 and up), so that designs at levels 1-3 - those of the tests and the
-planted suite, whose fronts are re-solved at the next level - give the same
-numbers with or without the extra.
+supernodal Cholesky: dense BLAS-3 blocks where qdldl's up-looking LDL^T works
+entry by entry. It takes the matrix in the direct backend's fill-reducing
+order (minimum degree, computed once per pattern) and keeps that order (an
+identity ``perm``, ``iparm[4] = 1``): it factorizes as fast as with PARDISO's
+own minimum degree and a quarter faster than with its METIS ordering at levels
+4-5 (measured), and its analysis (the symbolic factorization, once per sparsity
+pattern) is then the cheapest; each factorization after that computes only the
+numbers. Measured on t_shape's fiber lattice (one thread): one factorization
+takes 0.65 / 1.6 / 4.3 / 12 / 33 ms against qdldl's 1.2 / 3.8 / 12.5 / 40 /
+122 ms at 1394 / 2716 / 5336 / 10504 / 20812 DOFs (levels 2-6), on finger's
+0.38 / 1.05 ms against 0.72 / 2.4 ms at 880 / 1702 DOFs (levels 2, 3), so the
+direct backend takes it at every size (:data:`PARDISO_MIN_DOFS`). Without the
+extra the numbers are qdldl's: the same designs up to round-off, which the
+search can turn into another layout here and there.
 
 One thread per process, so that a factorization is the same to the bit run
 after run (the design's worker processes use the other cores).
@@ -32,8 +35,8 @@ import numpy as np
 from ._csc import triangle
 
 #: the direct backend factorizes with PARDISO from this many free DOFs on (where it loads):
-#: level 5 and up of every built-in scene (level 4 has 3334-5952 free DOFs)
-PARDISO_MIN_DOFS = 6000
+#: every size (it is the faster from the smallest built-in mesh on, module docstring)
+PARDISO_MIN_DOFS = 0
 
 _lib: dict = {}
 _INT_P = ctypes.POINTER(ctypes.c_int32)
@@ -82,7 +85,9 @@ class PardisoLDL:
         self.generation = 0
         self._pt = np.zeros(64, dtype=np.int64)
         self._iparm = np.zeros(64, dtype=np.int32)
-        self._iparm[[0, 1, 9, 34]] = (1, 2, 13, 1)  # own settings, METIS ordering, pivot eps, 0-based
+        # own settings, the ordering given (perm), pivot eps, 0-based indices
+        self._iparm[[0, 4, 9, 34]] = (1, 1, 13, 1)
+        self._perm = np.arange(n, dtype=np.int32)  # the pattern is in the direct backend's fill-reducing order
         self._data = np.zeros(len(self.ja))
         self._analyzed = False  # phase 11 done (and its memory to release)
 
@@ -94,7 +99,8 @@ class PardisoLDL:
         _load()(self._pt.ctypes.data_as(ctypes.c_void_p), one, one, ctypes.byref(ctypes.c_int32(2)),
                 ctypes.byref(ctypes.c_int32(phase)), ctypes.byref(ctypes.c_int32(self.n)),
                 self._data.ctypes.data_as(ctypes.c_void_p), self.ia.ctypes.data_as(_INT_P),
-                self.ja.ctypes.data_as(_INT_P), None, one, self._iparm.ctypes.data_as(_INT_P),
+                self.ja.ctypes.data_as(_INT_P), self._perm.ctypes.data_as(_INT_P), one,
+                self._iparm.ctypes.data_as(_INT_P),
                 ctypes.byref(ctypes.c_int32(0)),
                 ctypes.byref(dummy) if b is None else b.ctypes.data_as(ctypes.c_void_p),
                 ctypes.byref(dummy) if x is None else x.ctypes.data_as(ctypes.c_void_p), ctypes.byref(err))
@@ -129,8 +135,8 @@ class PardisoLDL:
         return state
 
     def __del__(self):
-        if self._analyzed and _lib.get("pardiso") is not None:
-            try:
+        try:
+            if self._analyzed and _lib.get("pardiso") is not None:
                 self._call(-1)  # release PARDISO's memory
-            except Exception:  # noqa: BLE001 - interpreter shutdown
-                pass
+        except Exception:  # noqa: BLE001 - at interpreter shutdown the module's names may be gone
+            pass
