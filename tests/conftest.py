@@ -41,12 +41,12 @@ def rng():
 
 def use_cholesky(monkeypatch, name: str):
     """Make the direct backend factorize with ``name`` ("qdldl" or "pardiso", the test
-    skipped where MKL is not installed) at every size; its class."""
+    skipped where MKL is not installed); its class."""
     from tendon_taichi.solve import direct, pardiso
 
     if name == "pardiso" and not pardiso.available():
         pytest.skip("MKL PARDISO is not installed (the mkl extra)")
-    monkeypatch.setattr(direct, "PARDISO_MIN_DOFS", 0 if name == "pardiso" else 10**9)
+    monkeypatch.setattr(direct, "pardiso_available", lambda: name == "pardiso")
     return pardiso.PardisoLDL if name == "pardiso" else direct.LDL
 
 

@@ -31,7 +31,7 @@ from ..physics.model import Model
 from ._csc import triangle
 from ._newton_kernels import direction_from
 from .linear import LinearSolver, LinearStats
-from .pardiso import PARDISO_MIN_DOFS, PardisoLDL
+from .pardiso import PardisoLDL
 from .pardiso import available as pardiso_available
 
 
@@ -332,9 +332,8 @@ class DirectSolver(LinearSolver):
     def factorize(self, H: Assembled) -> Factorization:
         """Factorize an ordered Hessian (:meth:`assemble_ordered`)."""
         if self.pattern.ldl is None:
-            n = self.shape[0]
-            cholesky = PardisoLDL if n >= PARDISO_MIN_DOFS and pardiso_available() else LDL
-            self.pattern.ldl = cholesky(self.indptr, self.indices, n)
+            cholesky = PardisoLDL if pardiso_available() else LDL
+            self.pattern.ldl = cholesky(self.indptr, self.indices, self.shape[0])
         return Factorization(H, self.order, self.pattern.ldl)
 
     def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:

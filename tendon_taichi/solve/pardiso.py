@@ -14,7 +14,7 @@ numbers. Measured on t_shape's fiber lattice (one thread): one factorization
 takes 0.65 / 1.6 / 4.3 / 12 / 33 ms against qdldl's 1.2 / 3.8 / 12.5 / 40 /
 122 ms at 1394 / 2716 / 5336 / 10504 / 20812 DOFs (levels 2-6), on finger's
 0.38 / 1.05 ms against 0.72 / 2.4 ms at 880 / 1702 DOFs (levels 2, 3), so the
-direct backend takes it at every size (:data:`PARDISO_MIN_DOFS`). Without the
+direct backend takes it at every size where it loads. Without the
 extra the numbers are qdldl's: the same designs up to round-off, which the
 search can turn into another layout here and there.
 
@@ -33,10 +33,6 @@ from ctypes.util import find_library
 import numpy as np
 
 from ._csc import triangle
-
-#: the direct backend factorizes with PARDISO from this many free DOFs on (where it loads):
-#: every size (it is the faster from the smallest built-in mesh on, module docstring)
-PARDISO_MIN_DOFS = 0
 
 _lib: dict = {}
 _INT_P = ctypes.POINTER(ctypes.c_int32)
