@@ -35,7 +35,6 @@ import numpy as np
 from ._csc import triangle
 
 _lib: dict = {}
-_INT_P = ctypes.POINTER(ctypes.c_int32)
 
 
 def _load():
@@ -86,20 +85,30 @@ class PardisoLDL:
         self._perm = np.arange(n, dtype=np.int32)  # the pattern is in the direct backend's fill-reducing order
         self._data = np.zeros(len(self.ja))
         self._analyzed = False  # phase 11 done (and its memory to release)
+        self._args = None  # the call's fixed arguments (:meth:`_fixed_args`)
+
+    def _fixed_args(self) -> tuple:
+        """The call's arguments that stay the same from call to call, made once (a
+        small system otherwise spends as long converting them as PARDISO spends
+        solving): those before ``phase`` (pt, maxfct, mnum, mtype), those between
+        it and ``b`` (n, a, ia, ja, perm, nrhs, iparm, msglvl) and the stand-in
+        for an absent ``b`` or ``x``."""
+        if self._args is None:
+            ptr, one = ctypes.c_void_p, ctypes.byref(ctypes.c_int32(1))
+            self._args = ((ptr(self._pt.ctypes.data), one, one, ctypes.byref(ctypes.c_int32(2))),
+                          (ctypes.byref(ctypes.c_int32(self.n)), ptr(self._data.ctypes.data),
+                           ptr(self.ia.ctypes.data), ptr(self.ja.ctypes.data), ptr(self._perm.ctypes.data), one,
+                           ptr(self._iparm.ctypes.data), ctypes.byref(ctypes.c_int32(0))),
+                          ctypes.byref(ctypes.c_double(0.0)))
+        return self._args
 
     def _call(self, phase: int, b: np.ndarray | None = None) -> tuple[int, np.ndarray | None]:
+        before, between, absent = self._fixed_args()
         x = None if b is None else np.empty_like(b)
         err = ctypes.c_int32(0)
-        one = ctypes.byref(ctypes.c_int32(1))
-        dummy = ctypes.c_double(0.0)
-        _load()(self._pt.ctypes.data_as(ctypes.c_void_p), one, one, ctypes.byref(ctypes.c_int32(2)),
-                ctypes.byref(ctypes.c_int32(phase)), ctypes.byref(ctypes.c_int32(self.n)),
-                self._data.ctypes.data_as(ctypes.c_void_p), self.ia.ctypes.data_as(_INT_P),
-                self.ja.ctypes.data_as(_INT_P), self._perm.ctypes.data_as(_INT_P), one,
-                self._iparm.ctypes.data_as(_INT_P),
-                ctypes.byref(ctypes.c_int32(0)),
-                ctypes.byref(dummy) if b is None else b.ctypes.data_as(ctypes.c_void_p),
-                ctypes.byref(dummy) if x is None else x.ctypes.data_as(ctypes.c_void_p), ctypes.byref(err))
+        _load()(*before, ctypes.byref(ctypes.c_int32(phase)), *between,
+                absent if b is None else ctypes.c_void_p(b.ctypes.data),
+                absent if x is None else ctypes.c_void_p(x.ctypes.data), ctypes.byref(err))
         return err.value, x
 
     def factor(self, data: np.ndarray) -> bool:
@@ -127,7 +136,7 @@ class PardisoLDL:
         """A copy (pickled) has no PARDISO handle: it analyzes again with its first
         factorization, and a factorization holding it factorizes a copy first."""
         state = dict(self.__dict__)
-        state.update(_pt=np.zeros(64, dtype=np.int64), _analyzed=False, generation=-1)
+        state.update(_pt=np.zeros(64, dtype=np.int64), _analyzed=False, generation=-1, _args=None)
         return state
 
     def __del__(self):
