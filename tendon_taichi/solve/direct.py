@@ -55,12 +55,15 @@ class Assembled:
 class LDL:
     """LDL^T factorizations (qdldl) of symmetric matrices of one sparsity pattern
     (CSC ``indptr``, ``indices``, n x n): the symbolic analysis with the first,
-    only the numbers after. One factorization is current at a time
-    (``generation`` counts them)."""
+    only the numbers after. qdldl orders every pattern by its own AMD, so
+    ``reorder`` (:class:`~tendon_taichi.solve.pardiso.PardisoLDL`'s) changes
+    nothing here. One factorization is current at a time (``generation`` counts
+    them)."""
 
-    def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int):
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int, reorder: bool = False):
         self.upper, self.indices, self.indptr = triangle(indptr, indices, n)
         self.n = n
+        self.reorder = reorder
         self.solver = None
         self.generation = 0
 
@@ -108,7 +111,7 @@ class Factorization:
         if self.lu is not None:
             return self.lu.solve(b)
         if self.ldl.generation != self.generation:  # the shared factors moved on: factorize a copy of its own
-            own = type(self.ldl)(self.Hp.indptr, self.Hp.indices, self.Hp.shape[0])
+            own = type(self.ldl)(self.Hp.indptr, self.Hp.indices, self.Hp.shape[0], self.ldl.reorder)
             own.factor(self.Hp.data)
             self.ldl, self.generation = own, own.generation
         return self.ldl.solve(b)
@@ -163,7 +166,9 @@ class _Pattern:
     """A sparsity pattern of the Hessian on the free DOFs in the fill-reducing
     ``order``: ``keep`` which element and segment entries lie on free DOFs, ``pos``
     each kept entry's index among the ``nnz`` CSC entries (``indices``, ``indptr``),
-    and the :class:`LDL` of the pattern once one was made."""
+    ``reorder`` whether ``order`` leaves couplings out (a tendon robot's: the
+    elements' order), so that the Cholesky orders the pattern again, and the
+    :class:`LDL` of the pattern once one was made."""
 
     keep: np.ndarray
     order: np.ndarray
@@ -171,6 +176,7 @@ class _Pattern:
     indices: np.ndarray
     indptr: np.ndarray
     nnz: int
+    reorder: bool
     ldl: LDL | None = None
 
 
@@ -249,7 +255,7 @@ class DirectSolver(LinearSolver):
             uniq, pos = np.unique(order[c].astype(np.int64) * nf + order[r], return_inverse=True)
         indices = (uniq % nf).astype(np.int32)
         indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
-        return _Pattern(keep, order, pos, indices, indptr, len(uniq))
+        return _Pattern(keep, order, pos, indices, indptr, len(uniq), reorder=not (self.ordered and m.single))
 
     @property
     def ldl(self) -> LDL | None:
@@ -333,7 +339,7 @@ class DirectSolver(LinearSolver):
         """Factorize an ordered Hessian (:meth:`assemble_ordered`)."""
         if self.pattern.ldl is None:
             cholesky = PardisoLDL if pardiso_available() else LDL
-            self.pattern.ldl = cholesky(self.indptr, self.indices, self.shape[0])
+            self.pattern.ldl = cholesky(self.indptr, self.indices, self.shape[0], self.pattern.reorder)
         return Factorization(H, self.order, self.pattern.ldl)
 
     def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:

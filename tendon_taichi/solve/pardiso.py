@@ -4,17 +4,24 @@ factorization where it is installed (optional: the ``mkl`` extra;
 
 PARDISO factorizes a symmetric positive definite matrix (``mtype`` 2) by a
 supernodal Cholesky: dense BLAS-3 blocks where qdldl's up-looking LDL^T works
-entry by entry. It takes the matrix in the direct backend's fill-reducing
-order (minimum degree, computed once per pattern) and keeps that order (an
-identity ``perm``, ``iparm[4] = 1``): it factorizes as fast as with PARDISO's
-own minimum degree and a quarter faster than with its METIS ordering at levels
-4-5 (measured), and its analysis (the symbolic factorization, once per sparsity
-pattern) is then the cheapest; each factorization after that computes only the
-numbers. Measured on t_shape's fiber lattice (one thread): one factorization
-takes 0.65 / 1.6 / 4.3 / 12 / 33 ms against qdldl's 1.2 / 3.8 / 12.5 / 40 /
-122 ms at 1394 / 2716 / 5336 / 10504 / 20812 DOFs (levels 2-6), on finger's
-0.38 / 1.05 ms against 0.72 / 2.4 ms at 880 / 1702 DOFs (levels 2, 3), so the
-direct backend takes it at every size where it loads. Without the
+entry by entry. Its analysis (the symbolic factorization) runs once per
+sparsity pattern; each factorization after that computes only the numbers.
+
+The ordering. A fiber lattice's matrix comes in the direct backend's
+fill-reducing order of its whole pattern (minimum degree, computed once per
+model), and PARDISO keeps it (an identity ``perm``, ``iparm[4] = 1``): it then
+factorizes as fast as in its own minimum degree order and a quarter faster than
+in its METIS order at levels 4-5, and its analysis is the cheapest. On t_shape's
+lattice (one thread) one factorization takes 0.65 / 1.6 / 4.3 / 12 / 33 ms
+against qdldl's 1.2 / 3.8 / 12.5 / 40 / 122 ms at 1394 / 2716 / 5336 / 10504 /
+20812 DOFs (levels 2-6), on finger's 0.38 / 1.05 ms against 0.72 / 2.4 ms at
+880 / 1702 DOFs (levels 2, 3). A tendon robot's pattern comes in the elements'
+order alone (shared by every tendon layout of a mesh), which does not see the
+couplings the segments add along each route: in it the factors of a level-2
+finger's robots held up to 3x the entries and took up to 4x as long, so those
+patterns are ordered by PARDISO's own minimum degree (``reorder``), as qdldl
+orders every pattern by its AMD: about 0.25 ms each, qdldl's 0.23-0.34 ms. So
+the direct backend takes PARDISO at every size where it loads. Without the
 extra the numbers are qdldl's: the same designs up to round-off, which the
 search can turn into another layout here and there.
 
@@ -69,20 +76,26 @@ class PardisoLDL:
     """Cholesky factorizations by PARDISO of symmetric matrices of one sparsity
     pattern (CSC ``indptr``, ``indices``, n x n, both triangles): the analysis
     with the first, only the numbers after - the interface of the direct
-    backend's qdldl :class:`~tendon_taichi.solve.direct.LDL`. One factorization
-    is current at a time (``generation`` counts them)."""
+    backend's qdldl :class:`~tendon_taichi.solve.direct.LDL`. The pattern is
+    factorized in its own order, or with ``reorder`` in PARDISO's minimum degree
+    order of it (module docstring). One factorization is current at a time
+    (``generation`` counts them)."""
 
-    def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int):
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int, reorder: bool = False):
         # the lower triangle by columns is the upper triangle by rows, as PARDISO takes it
         self.lower, ja, self.ia = triangle(indptr, indices, n, lower=True)
         self.ja = np.ascontiguousarray(ja, dtype=np.int32)
         self.n = n
+        self.reorder = reorder
         self.generation = 0
         self._pt = np.zeros(64, dtype=np.int64)
         self._iparm = np.zeros(64, dtype=np.int32)
-        # own settings, the ordering given (perm), pivot eps, 0-based indices
-        self._iparm[[0, 4, 9, 34]] = (1, 1, 13, 1)
-        self._perm = np.arange(n, dtype=np.int32)  # the pattern is in the direct backend's fill-reducing order
+        # own settings, pivot eps, 0-based indices; the ordering: PARDISO's minimum
+        # degree (iparm[1] = 0) or the pattern's own (an identity perm given, iparm[4] = 1)
+        self._iparm[[0, 9, 34]] = (1, 13, 1)
+        self._iparm[4] = 0 if reorder else 1
+        self._iparm[17] = -1  # report the factor's entries (:attr:`entries`)
+        self._perm = np.arange(n, dtype=np.int32)
         self._data = np.zeros(len(self.ja))
         self._analyzed = False  # phase 11 done (and its memory to release)
         self._args = None  # the call's fixed arguments (:meth:`_fixed_args`)
@@ -110,6 +123,12 @@ class PardisoLDL:
                 absent if b is None else ctypes.c_void_p(b.ctypes.data),
                 absent if x is None else ctypes.c_void_p(x.ctypes.data), ctypes.byref(err))
         return err.value, x
+
+    @property
+    def entries(self) -> int:
+        """The entries of the Cholesky factor as PARDISO counts them (its supernodes
+        padded), from the first factorization on (0 before)."""
+        return int(self._iparm[17]) if self._analyzed else 0
 
     def factor(self, data: np.ndarray) -> bool:
         """Factorize the matrix of entries ``data`` (in the pattern's order); whether
