@@ -5,6 +5,8 @@ the results complete (run here) and says so; an error a task raises reaches
 the caller; with no workers nothing is started."""
 
 import os
+import threading
+from functools import partial
 
 import pytest
 
@@ -29,6 +31,22 @@ def fail(x: int) -> int:
 
 def broken_setup() -> None:
     raise RuntimeError("no Taichi here")
+
+
+#: the threads that pickled a Traced (in this process)
+PICKLED_IN: list[str] = []
+
+
+class Traced:
+    """Records which thread pickles it."""
+
+    def __reduce__(self):
+        PICKLED_IN.append(threading.current_thread().name)
+        return (Traced, ())
+
+
+def both_traced(shared, item) -> bool:
+    return isinstance(shared, Traced) and isinstance(item, Traced)
 
 
 def test_a_map_is_the_same_calls_in_order_shared_with_a_worker():
@@ -68,3 +86,14 @@ def test_an_error_a_task_raises_reaches_the_caller():
             pool.map(fail, [0, 1, 2, 3])
     with pytest.raises(ValueError, match="workers must be >= 0"):
         Pool(-1)
+
+
+def test_what_the_workers_get_is_pickled_in_the_calling_thread():
+    """The executor pickles what it is handed in a thread of its own, which would
+    race the calling thread's computing with the same objects (a design failed
+    with "dictionary changed size during iteration"): the pool pickles the
+    function and every item in the calling thread, before it hands any out."""
+    PICKLED_IN.clear()
+    with Pool(1) as pool:
+        assert pool.map(partial(both_traced, Traced()), [Traced() for _ in range(6)]) == [True] * 6
+    assert len(PICKLED_IN) >= 2 and set(PICKLED_IN) == {threading.current_thread().name}

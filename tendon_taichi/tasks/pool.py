@@ -11,7 +11,9 @@ process takes the next one itself whenever it is free, so ``workers = cores -
 1`` keeps every core busy.
 The results come back in the items' order and are those of
 ``[fn(item) for item in items]`` whenever ``fn`` depends only on its
-argument: which process ran an item does not change what it gives.
+argument: which process ran an item does not change what it gives. ``fn``
+and the items are pickled in the calling thread as the map starts, not by
+the executor's own thread while this process computes with the same objects.
 
 With ``workers = 0`` everything runs in this process. A worker that dies (its
 process killed, out of memory) or a ``setup`` that fails (the worker then ends
@@ -28,11 +30,17 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import pickle
 import signal
 import threading
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Iterable
+
+
+def _run(fn_pickled: bytes, item_pickled: bytes) -> Any:
+    """What a worker runs: ``fn(item)``, both pickled by the process that runs the job."""
+    return pickle.loads(fn_pickled)(pickle.loads(item_pickled))
 
 
 def _ready() -> bool:
@@ -80,6 +88,11 @@ class Pool:
         items = list(items)
         if self._executor is None or len(items) < 2:
             return [fn(item) for item in items]
+        # pickled here, now: the executor pickles what it is handed in a thread of its own,
+        # which would race this one's computing with the same objects (a cached property
+        # filled in meanwhile: "dictionary changed size during iteration")
+        fn_pickled = pickle.dumps(fn, protocol=pickle.HIGHEST_PROTOCOL)
+        pickled = [pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL) for item in items]
         lock = threading.Lock()
         taken = [0]
         futures: dict[int, Future] = {}
@@ -98,7 +111,7 @@ class Pool:
                 if i is None:
                     return
                 try:
-                    futures[i] = executor.submit(fn, items[i])
+                    futures[i] = executor.submit(_run, fn_pickled, pickled[i])
                 except (BrokenProcessPool, RuntimeError):  # broken or closed meanwhile: this process runs it
                     futures[i] = Future()
                     futures[i].set_exception(BrokenProcessPool("the pool stopped"))
