@@ -2,7 +2,8 @@
 the free DOFs and factorized, with a fill-reducing ordering computed once per
 sparsity pattern: by LDL^T (qdldl, its symbolic analysis once per pattern and
 only the numbers afterwards; where MKL is installed, by PARDISO's supernodal
-Cholesky instead, in the same order: :mod:`.pardiso`) where
+Cholesky instead - a fiber lattice in that order, a tendon robot in PARDISO's
+own minimum degree order (:attr:`_Pattern.reorder`): :mod:`.pardiso`) where
 the matrix is positive definite - at and near a stable equilibrium, almost
 always - and by SuperLU with pivoting where it is not (an LDL^T with a pivot
 <= 0 proves it: by Sylvester's law of inertia D has as many negative entries as
