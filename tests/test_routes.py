@@ -331,8 +331,8 @@ def test_robots_of_the_same_cables_share_their_pattern_not_their_factors():
     same, second = _as_a_new_robot(p, obj, z0, start)
     assert same
     taken = second.poses[0].linear
-    assert taken.pattern is not made.pattern and taken.pattern.pos is made.pattern.pos
+    assert taken.pattern is not made.pattern and taken.pattern.scatter is made.pattern.scatter
     assert taken.ldl is not None and taken.ldl is not made.ldl
     direct._SHARED_PATTERNS.clear()
     same, anew = _as_a_new_robot(p, obj, z0, start)
-    assert same and anew.poses[0].linear.pattern.pos is not made.pattern.pos
+    assert same and anew.poses[0].linear.pattern.scatter is not made.pattern.scatter

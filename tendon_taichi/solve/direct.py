@@ -165,15 +165,14 @@ class _ElementPattern:
 @dataclass
 class _Pattern:
     """A sparsity pattern of the Hessian on the free DOFs in the fill-reducing
-    ``order``: ``keep`` which element and segment entries lie on free DOFs, ``pos``
-    each kept entry's index among the ``nnz`` CSC entries (``indices``, ``indptr``),
-    ``reorder`` whether ``order`` leaves couplings out (a tendon robot's: the
-    elements' order), so that the Cholesky orders the pattern again, and the
-    :class:`LDL` of the pattern once one was made."""
+    ``order``: ``scatter`` each element and segment entry's index among the ``nnz``
+    CSC entries (``indices``, ``indptr``), or ``nnz`` for an entry on a fixed DOF (a
+    bin the assembly drops), ``reorder`` whether ``order`` leaves couplings out (a
+    tendon robot's: the elements' order), so that the Cholesky orders the pattern
+    again, and the :class:`LDL` of the pattern once one was made."""
 
-    keep: np.ndarray
     order: np.ndarray
-    pos: np.ndarray
+    scatter: np.ndarray
     indices: np.ndarray
     indptr: np.ndarray
     nnz: int
@@ -220,7 +219,7 @@ class DirectSolver(LinearSolver):
         key = self._tri.tobytes() + cab.segments.tobytes()
         pattern = _recent(self._patterns, key, lambda: self._shared_pattern(key), PATTERNS_KEPT)
         self.pattern = pattern
-        self.keep, self.order, self.pos = pattern.keep, pattern.order, pattern.pos
+        self.order, self.scatter = pattern.order, pattern.scatter
         self.indices, self.indptr, self.nnz = pattern.indices, pattern.indptr, pattern.nnz
 
     def _shared_pattern(self, key: bytes) -> _Pattern:
@@ -256,7 +255,9 @@ class DirectSolver(LinearSolver):
             uniq, pos = np.unique(order[c].astype(np.int64) * nf + order[r], return_inverse=True)
         indices = (uniq % nf).astype(np.int32)
         indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
-        return _Pattern(keep, order, pos, indices, indptr, len(uniq), reorder=not (self.ordered and m.single))
+        scatter = np.full(len(keep), len(uniq), dtype=np.intp)
+        scatter[keep] = pos
+        return _Pattern(order, scatter, indices, indptr, len(uniq), reorder=not (self.ordered and m.single))
 
     @property
     def ldl(self) -> LDL | None:
@@ -323,8 +324,9 @@ class DirectSolver(LinearSolver):
         """``P H P^T``: the Hessian on the free DOFs in the fill-reducing order."""
         if prepare:
             self.model.prepare_hessian(project)
-        vals = self._values()[self.keep]
-        data = np.bincount(self.pos, weights=vals, minlength=self.nnz)
+        # the entries on fixed DOFs add into one more bin, dropped: a kept entry's sums
+        # are those of the kept entries alone, in the same order
+        data = np.bincount(self.scatter, weights=self._values(), minlength=self.nnz + 1)[:self.nnz]
         U, K = self._low_rank()
         return Assembled(sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape), U, K)
 
