@@ -269,3 +269,41 @@ def test_a_stage_settled_where_it_is_reports_the_settled_state(solver):
     ps.model.set_positions(ik.state()[0][0])
     g = ps.model.gradient()[~p.fixed]
     assert np.linalg.norm(g) <= STATE_TOL * ps.state_newton.force_scale
+
+
+@pytest.mark.parametrize("solver", ["direct", "cg"])
+def test_a_restart_at_the_last_restarts_contractions_is_a_solve_from_rest(t_shape_1, solver):
+    """A stage's final state is solved from rest, and so is the next stage's start,
+    at the same contractions: the direct backend takes the last restart's equilibrium
+    again (its solves start afresh), and the run goes on exactly as after a new
+    solve from rest - here, as a new soft IK's; cg (a reused preconditioner) solves again."""
+    p = t_shape_1
+    rng = np.random.default_rng(3)
+
+    def soft_ik():
+        ik = SoftIK(p, p.scene.optimize, solver)
+        ik.configure(0.5)
+        ps = ik.poses[0]
+        solve = ps.state_newton.solve
+        ps.state_solves = 0
+
+        def counted(*args, **kwargs):
+            ps.state_solves += 1
+            return solve(*args, **kwargs)
+        ps.state_newton.solve = counted
+        return ik
+
+    ik = soft_ik()
+    r1 = rng.uniform(0.0, 0.03, len(ik.a0))
+    r2 = r1 * (1 + 0.05 * rng.uniform(-1, 1, len(r1)))
+    ik.restart(r1)
+    ik.evaluate(r2)  # the run moves on, then comes back to r1
+    again = ik.restart(r1)[0]
+    f, g = ik.evaluate(r2)
+    new = soft_ik()
+    first = new.restart(r1)[0]
+    f_new, g_new = new.evaluate(r2)
+    assert ik.poses[0].state_solves == (1 if solver == "direct" else 2)
+    assert np.array_equal(again.x, first.x) and np.array_equal(again.tau, first.tau)
+    assert f == f_new and np.array_equal(g, g_new)
+    assert np.array_equal(ik.state()[0], new.state()[0])

@@ -18,7 +18,7 @@ equilibrium and adjoint solve, and the layout terms see the union tension
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -116,13 +116,34 @@ class PoseSolve:
         self.lambda_warm = False
         self.pred = None
         self.x_last = problem.mesh.nodes
+        #: the last restart: its contractions (bytes), equilibrium and the linear
+        #: backend's checkpoint after it (:meth:`restart`)
+        self.rest: tuple | None = None
 
     def restart(self, ac: np.ndarray) -> Equilibrium:
-        """The equilibrium at ``ac`` (m) solved from rest, and a cold adjoint."""
+        """The equilibrium at ``ac`` (m) solved from rest, and a cold adjoint.
+
+        A solve from rest depends on ``ac`` alone, so a restart at the last one's
+        ``ac`` (a stage's final state is the next stage's start) takes its
+        equilibrium, and the factorization it left, again - where nothing else
+        carries over from the solves in between: no friction (its weights follow
+        the path) and a backend whose solves start afresh
+        (:attr:`~tendon_taichi.solve.linear.LinearSolver.fresh_solves`)."""
         self.lambda_warm = False
         self.pred = None
         self.linear.reset()
-        return self.state_newton.solve(ac=ac, x0=self.problem.mesh.nodes)
+        ac = np.asarray(ac, dtype=float)
+        key = ac.tobytes()
+        reusable = self.model.capstan is None and self.linear.fresh_solves
+        if reusable and self.rest is not None and self.rest[0] == key:
+            _, eq, state = self.rest
+            self.model.set_contraction(ac)
+            self.model.set_positions(eq.x)
+            self.linear.resume(state)
+            return replace(eq, x=eq.x.copy(), tau=eq.tau.copy())
+        eq = self.state_newton.solve(ac=ac, x0=self.problem.mesh.nodes)
+        self.rest = (key, eq, self.linear.checkpoint()) if reusable else None
+        return eq
 
     def _predict(self, ac: np.ndarray) -> np.ndarray | None:
         """First-order prediction of x*(ac) from the last equilibrium, whose Hessian the
@@ -237,7 +258,7 @@ class SoftIK:
         for ps in self.poses:
             ps.model.move_cables(cables)
             ps.linear.cables_moved()
-            ps.lambda_warm, ps.pred = False, None
+            ps.lambda_warm, ps.pred, ps.rest = False, None, None
         self.a0 = np.tile(cables.a0, self.problem.n_poses)
         self.objective = self._objective(cables.a0)
         self.configure(self.k)

@@ -190,6 +190,7 @@ class DirectSolver(LinearSolver):
     instead of a fill-reducing order, for assembly without factorization."""
 
     name = "direct"
+    fresh_solves = True
 
     #: keep the last factorization for Newton's chord steps when the cables move (a
     #: route's small step barely changes the Hessian, and Newton's chord test refreshes
@@ -375,6 +376,13 @@ class DirectSolver(LinearSolver):
     def reset(self) -> None:
         """Forget the last factorization."""
         self.factor = None
+
+    def checkpoint(self) -> tuple:
+        """The last factorization and whether it is of the exact Hessian."""
+        return self.factor, self.factor_exact
+
+    def resume(self, state: tuple) -> None:
+        self.factor, self.factor_exact = state
 
     def newton_direction(self, eta: float, project: bool, fresh: bool = True) -> tuple[float, bool, int]:
         """With ``fresh=False`` and a factorization at hand (of the exact Hessian at a

@@ -62,6 +62,9 @@ class LinearSolver(ABC):
 
     name: str
     stats: LinearStats
+    #: whether :meth:`solve` after :meth:`reset` depends on the model's state alone (a
+    #: fresh factorization), not on the solves before it (a reused preconditioner)
+    fresh_solves: bool = False
 
     @abstractmethod
     def newton_direction(self, eta: float, project: bool, fresh: bool = True) -> tuple[float, bool, int]:
@@ -94,6 +97,15 @@ class LinearSolver(ABC):
     @abstractmethod
     def reset(self) -> None:
         """Forget reused state (a stage start must not depend on earlier stages)."""
+
+    def checkpoint(self):
+        """What the next solves may reuse (a backend with :attr:`fresh_solves`: the
+        factorization at hand), to :meth:`resume` from later; None: nothing."""
+        return None
+
+    def resume(self, state) -> None:
+        """Back to a :meth:`checkpoint`, as if no solve had been made since."""
+        self.reset()
 
     def cables_moved(self) -> None:
         """The model's cables moved (:meth:`~tendon_taichi.physics.model.Model.move_cables`):
