@@ -2,7 +2,7 @@
 bench.png and table.txt, and the performance page docs/performance.md.
 
 Usage: python benchmarks/bench/make_bench.py [--levels 1 2 3 4 5 6] [--repeat 3] [--out DIR]
-       [--page FILE] [--optimize-levels N ... | --no-optimize]
+       [--page FILE] [--optimize-levels N ... | --no-optimize] [--alone N | --alone]
        python benchmarks/bench/make_bench.py --page-only [--out DIR] [--page FILE]
 
 Runs the resolution-scaling benchmark on t_shape with the linear backends cg,
@@ -13,22 +13,29 @@ auto`` picks at each level
 optimization at those levels only), then writes DIR/table.txt and the page
 (the table, the fitted exponents, the plot, the optimization's quality per
 level, the machine and the commit that made it; the design pipeline's own
-folders go to a temporary folder, removed at the end); ``--page-only`` writes
-table.txt and the page again from DIR/bench.json without measuring. Defaults:
-levels 1-6 (the whole design pipeline at 1-3: at 4 and 5 it takes most of
-an hour more), 3 repeats, this folder and docs/performance.md; the run takes
-about ten minutes on 2 cores (8 min at 0650ba5).
+folders go to a temporary folder, removed at the end); then the whole
+optimization at level ``--alone`` (5; none with a bare ``--alone``) in a process
+of its own (``tendon-taichi optimize t_shape --resolution N --quiet --json``):
+its wall time and peak resident memory, into bench.json and the page.
+``--page-only`` writes table.txt and the page again from DIR/bench.json without
+measuring. Defaults: levels 1-6 (the whole design pipeline at 1-3: at 4 and 5 it
+takes most of an hour more), 3 repeats, this folder and docs/performance.md; the
+run takes about ten minutes on 2 cores (8 min at 0650ba5), plus the level run
+alone (about 1.5 min at level 5).
 """
 
 import argparse
 import json
 import os
+import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 from tendon_taichi import load_scene
 from tendon_taichi.apps.bench import run_bench, table
+from tendon_taichi.files import write_json
 
 HERE = Path(__file__).resolve().parent
 PAGE = HERE.parent.parent / "docs" / "performance.md"
@@ -80,10 +87,38 @@ def quality_table(result: dict) -> list[str]:
     return rows
 
 
+def optimize_alone(level: int) -> dict:
+    """The whole optimization of t_shape at ``level`` in a process of its own: its
+    wall time (s), the process's peak resident memory (MB, from ``wait4``: this
+    child's alone), and its summary's evaluations and own time."""
+    cmd = [sys.executable, "-m", "tendon_taichi", "optimize", "t_shape", "--resolution", str(level),
+           "--quiet", "--json"]
+    with tempfile.TemporaryFile() as out:
+        t = time.perf_counter()
+        proc = subprocess.Popen(cmd, stdout=out)
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        if proc.returncode:
+            raise SystemExit(f"make_bench: {' '.join(cmd[1:])} failed (exit status {proc.returncode})")
+        out.seek(0)
+        summary = json.loads(out.read())
+    return {"level": level, "command": "tendon-taichi " + " ".join(cmd[3:]), "wall_s": wall,
+            "peak_mb": usage.ru_maxrss / 1024, "evaluations": summary["evaluations"],
+            "time_s": summary["time_s"]}
+
+
+def alone_line(alone: dict) -> str:
+    return (f"The whole optimization at level {alone['level']} in a process of its own (`{alone['command']}`): "
+            f"{alone['wall_s']:.1f} s wall ({alone['evaluations']} evaluations), peak resident memory "
+            f"{alone['peak_mb']:.0f} MB.")
+
+
 def page(result: dict, lines: list[str], plot: str) -> str:
     m, p = result["machine"], result["provenance"]
     exps = [f"exponents {s}: " + ", ".join(f"{k[:-2]} {v:.2f}" for k, v in d.items())
             for s, d in sorted(result["exponents"].items())]
+    alone = [alone_line(result["alone"]), ""] if result.get("alone") else []
     return "\n".join([
         INTRO,
         f"Measured on {m['cores']} cores ({m['cpu']}, Taichi {m['arch']}, Python {m['python']}), "
@@ -95,7 +130,7 @@ def page(result: dict, lines: list[str], plot: str) -> str:
         "the optimization, every extractor with consolidation and route optimization, the front re-solved",
         "on the next finer mesh; `recording`, the size of its `run.rrd`; extractor columns: tendons /",
         "realizable pose error in % of L / kinks):",
-        "", *quality_table(result), ""])
+        "", *quality_table(result), "", *alone])
 
 
 def main(argv=None) -> int:
@@ -106,6 +141,8 @@ def main(argv=None) -> int:
     ap.add_argument("--page", type=Path, default=PAGE)
     ap.add_argument("--optimize-levels", type=int, nargs="+", default=[1, 2, 3], metavar="N")
     ap.add_argument("--no-optimize", action="store_true")
+    ap.add_argument("--alone", type=int, nargs="?", const=None, default=5, metavar="N",
+                    help="the level whose whole optimization runs in a process of its own (bare: none)")
     ap.add_argument("--page-only", action="store_true", help="write table.txt and the page from DIR/bench.json")
     args = ap.parse_args(argv)
     if args.page_only:
@@ -115,6 +152,10 @@ def main(argv=None) -> int:
             result = run_bench(load_scene("t_shape"), args.levels, ["cg", "cg-amg", "direct"], args.repeat,
                                args.out, [] if args.no_optimize else args.optimize_levels, optimize_solver="auto",
                                cases_dir=cases)
+        if args.alone is not None:
+            print(f"optimize t_shape at level {args.alone} in a process of its own ...", file=sys.stderr)
+            result["alone"] = optimize_alone(args.alone)
+            write_json(result, args.out / "bench.json")
     lines = table(result)
     (args.out / "table.txt").write_text("\n".join(lines) + "\n")
     plot = os.path.relpath(args.out / "bench.png", args.page.parent)
