@@ -158,7 +158,8 @@ def test_make_bench_writes_the_results_and_the_page(tmp_path):
     text = page.read_text()
     alone = res["alone"]  # the whole optimization at level 1 in a process of its own
     assert alone["level"] == 1 and alone["evaluations"] > 0 and 0 < alone["time_s"] < alone["wall_s"]
-    assert 50 < alone["peak_mb"] < 5000 and f"{alone['wall_s']:.1f} s wall" in text
+    assert f"{alone['wall_s']:.1f} s wall" in text
+    assert alone["peak_mb"] is None or 50 < alone["peak_mb"] < 5000  # Linux: read from /proc
     assert res["provenance"]["commit"] is None or res["provenance"]["commit"] in text
     table = (out / "table.txt").read_text().splitlines()
     assert table[0].split()[:4] == ["level", "DOFs", "fibers", "solver"] and len(table) == 4  # header + cg, cg-amg, direct
