@@ -21,7 +21,7 @@ its wall time and peak resident memory, into bench.json and the page.
 measuring. Defaults: levels 1-6 (the whole design pipeline at 1-3: at 4 and 5 it
 takes most of an hour more), 3 repeats, this folder and docs/performance.md; the
 run takes about ten minutes on 2 cores (8 min at 0650ba5), plus the level run
-alone (about 1.5 min at level 5).
+alone (about 2 min at level 5).
 """
 
 import argparse
