@@ -7,6 +7,9 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+
+if os.environ.get("PYTEST_XDIST_WORKER"):  # the test processes share the cores (and the CLIs they run)
+    os.environ.setdefault("TENDON_TAICHI_FACTOR_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 

@@ -263,6 +263,40 @@ def test_pardiso_solves_as_qdldl_does_and_the_same_every_time(monkeypatch):
     assert f1 == f2 and np.array_equal(g1, g2)
 
 
+def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatch):
+    """A lattice's Hessian (t_shape at level 3, 2716 DOFs) factorized by PARDISO on
+    1, 2 and 3 threads solves to the same bits; a process factorizes a matrix above
+    the parallel threshold on its threads only while it has its cores to itself."""
+    from tendon_taichi.physics import runtime
+    from tendon_taichi.solve import pardiso
+
+    use_cholesky(monkeypatch, "pardiso")
+    p = build_problem(load_scene("t_shape"), 3)
+    m = Model.from_problem(p)
+    NewtonSolver(m, "direct").solve(ac=0.05 * p.fibers.a0, x0=p.mesh.nodes)
+    H = DirectSolver(m).assemble_ordered().Hp
+    n = H.shape[0]
+    b = np.random.default_rng(0).standard_normal(n)
+    solutions = []
+    for threads in (1, 2, 3):
+        ldl = pardiso.PardisoLDL(H.indptr, H.indices, n)
+        ldl.threads = threads
+        assert ldl.factor(H.data) and ldl.factor(H.data)
+        assert ldl.threads_used == threads
+        solutions.append(ldl.solve(b))
+        assert np.linalg.norm(H @ solutions[-1] - b) <= 1e-10 * np.linalg.norm(b)
+    assert all(np.array_equal(solutions[0], y) for y in solutions[1:])
+
+    monkeypatch.setenv("TENDON_TAICHI_FACTOR_THREADS", "3")
+    large = pardiso.PARALLEL_MIN
+    assert pardiso.factor_threads(large) == 3 and pardiso.factor_threads(large - 1) == 1
+    with runtime.cores_shared(True):
+        assert pardiso.factor_threads(large) == 1
+        with runtime.cores_shared(False):
+            assert pardiso.factor_threads(large) == 1
+    assert pardiso.factor_threads(large) == 3
+
+
 @pytest.mark.parametrize("robot", ["lattice", "tendons"])
 def test_pardisos_factor_is_about_as_small_as_in_a_minimum_degree_order(monkeypatch, robot):
     """PARDISO factorizes a fiber lattice in the direct backend's order of its

@@ -132,9 +132,11 @@ def start_worker(threads: int | None, arch: str | None = None, warm: bool = True
     """A worker process's set-up (``design``'s pool, the task engine's Dask
     workers): start Taichi (``arch``, ``threads``) and, with ``warm``, compile the
     kernels by a short design (:func:`warm_up`); returns the times (``init_s``,
-    ``warm_up_s``)."""
+    ``warm_up_s``). Its factorizations run on one thread
+    (:func:`~tendon_taichi.physics.runtime.share_cores`)."""
     t0 = time.perf_counter()
     runtime.configure(arch=arch, threads=threads)
+    runtime.share_cores()  # its factorizations on one thread: other processes hold the other cores
     runtime.init()
     out = {"init_s": time.perf_counter() - t0, "warm_up_s": None}
     if warm:
@@ -184,7 +186,7 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     for name in FILES:
         check_writable(out / name, "output")
     here = runtime.info()
-    with Pool(workers, start_worker, (here["threads"], here["arch"])) as pool:
+    with Pool(workers, start_worker, (here["threads"], here["arch"])) as pool, runtime.cores_shared(workers > 0):
         progress.message(f"design: optimizing {scene.name} at level {level}"
                          + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
         run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)

@@ -42,7 +42,7 @@ _settings = {
     "threads": None,
     "parallel_threshold": None,
 }
-_state = {"initialized": False, "arch": None, "init_s": None}
+_state = {"initialized": False, "arch": None, "init_s": None, "cores_shared": False}
 
 
 def configure(arch: str | None = None, threads: int | None = None,
@@ -181,6 +181,51 @@ def host_view(arr) -> "np.ndarray | None":
     return np.frombuffer(raw, dtype=dtype)
 
 
+def cpu_threads() -> int:
+    """Threads a process's parallel CPU work may use: ``--threads`` (or
+    ``TENDON_TAICHI_THREADS``) where given, else the cores it may run on."""
+    requested = _requested_threads()
+    if requested is not None:
+        return requested
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def factor_threads() -> int:
+    """Threads a sparse factorization may use (:mod:`~tendon_taichi.solve.pardiso`):
+    ``TENDON_TAICHI_FACTOR_THREADS`` where given, else :func:`cpu_threads`, in a
+    process that has its cores to itself; one while it shares them with worker
+    processes (:func:`cores_shared`) or is one of them.
+    Threads that wait for a core another process holds make a factorization many
+    times slower (a level-3 design with one worker: 61 s on one thread each, 99 s
+    with the finer mesh's factorizations on two)."""
+    if _state["cores_shared"]:
+        return 1
+    env = os.environ.get("TENDON_TAICHI_FACTOR_THREADS")
+    if env:
+        try:
+            return max(1, int(env))
+        except ValueError:
+            raise InputError(f"TENDON_TAICHI_FACTOR_THREADS must be an integer (got '{env}')") from None
+    return cpu_threads()
+
+
+@contextlib.contextmanager
+def cores_shared(shared: bool = True):
+    """Within: this process shares its cores with others (a pool's workers, or as
+    one of them) where ``shared``; :func:`factor_threads` is then one."""
+    before = _state["cores_shared"]
+    _state["cores_shared"] = before or shared
+    try:
+        yield
+    finally:
+        _state["cores_shared"] = before
+
+
+def share_cores() -> None:
+    """From now on this process shares its cores (a worker's set-up)."""
+    _state["cores_shared"] = True
+
+
 def parallel_threshold() -> int:
     if _settings["parallel_threshold"] is not None:
         return _settings["parallel_threshold"]
@@ -202,4 +247,5 @@ def info() -> dict:
     }
 
 
-__all__ = ["ti", "configure", "init", "ensure_init", "is_cpu", "host_view", "parallel_threshold", "info"]
+__all__ = ["ti", "configure", "init", "ensure_init", "is_cpu", "host_view", "cpu_threads", "factor_threads",
+           "cores_shared", "share_cores", "parallel_threshold", "info"]

@@ -25,8 +25,16 @@ the direct backend takes PARDISO at every size where it loads. Without the
 extra the numbers are qdldl's: the same designs up to round-off, which the
 search can turn into another layout here and there.
 
-One thread per process, so that a factorization is the same to the bit run
-after run (the design's worker processes use the other cores).
+Threads. From :data:`PARALLEL_MIN` DOFs a factorization runs on the process's
+threads (:func:`~tendon_taichi.physics.runtime.factor_threads`: its cores where it
+has them to itself - ``optimize``, ``simulate``, ``bench`` -, one in ``design``,
+whose worker processes hold the other cores, and in every worker): at level 5
+about 1.7x faster on two. Its numbers do not depend on the threads: the
+factors of t_shape's lattices at levels 2-6 solve to the same bits on one thread
+and on two (level 5 also on 3, 4 and 8) with MKL's Intel OpenMP layer (its GNU
+layer gives other bits, even on one thread); ``tests/test_equilibrium.py``
+checks it. A PARDISO handle runs every phase on the threads of its analysis (on
+others it crashes).
 """
 
 from __future__ import annotations
@@ -39,9 +47,21 @@ from ctypes.util import find_library
 
 import numpy as np
 
+from ..physics import runtime
 from ._csc import triangle
 
 _lib: dict = {}
+
+#: MKL's names of its threading layers
+MKL_THREADING_INTEL, MKL_THREADING_SEQUENTIAL = 0, 1
+
+#: the least order of a matrix that is factorized on several threads. From there
+#: a whole optimization is faster (t_shape on 2 cores: level 4 43.5 s against
+#: 48.5, level 5 about 15 % less); at level 3 (2716 DOFs) a factorization is
+#: faster too (0.96 against 1.55 ms) but the optimization is not (27-32 s against
+#: 27-28: the second thread's waits cost the kernels around it), at level 2 not
+#: even the factorization (0.62 against 0.57 ms)
+PARALLEL_MIN = 4000
 
 
 def _load():
@@ -55,13 +75,13 @@ def _load():
         try:
             lib = ctypes.CDLL(name)
             lib.MKL_Set_Threading_Layer.argtypes = [ctypes.c_int]
-            lib.MKL_Set_Threading_Layer(1)  # MKL_THREADING_SEQUENTIAL: one thread, reproducible
-            lib.MKL_Domain_Set_Num_Threads.argtypes = [ctypes.c_int, ctypes.c_int]
-            lib.MKL_Domain_Set_Num_Threads(1, 4)  # PARDISO's domain, where MKL was loaded before
+            lib.MKL_Set_Threading_Layer(_threading_layer(name))
+            lib.MKL_Set_Num_Threads_Local.argtypes = [ctypes.c_int]
             fn = lib.pardiso
         except (OSError, AttributeError):  # not there, or not an MKL runtime we know
             continue
         fn.restype = None
+        _lib["set_threads"] = lib.MKL_Set_Num_Threads_Local
         break
     _lib["pardiso"] = fn
     return fn
@@ -70,6 +90,32 @@ def _load():
 def available() -> bool:
     """Whether MKL PARDISO loaded (the ``mkl`` extra is installed)."""
     return _load() is not None
+
+
+def _threading_layer(mkl_rt: str) -> int:
+    """MKL's threading layer: Intel OpenMP where its runtime loads (beside MKL's, as
+    the ``mkl`` wheel installs it), else sequential (one thread, whatever is asked).
+    The layer is chosen before MKL's first call; where it cannot load its runtime
+    then, MKL ends the process."""
+    if not os.environ.get("KMP_BLOCKTIME"):
+        # an idle thread spins 1 ms, then sleeps: OpenMP's 200 ms holds a core the work
+        # between factorizations needs, 0 wakes it too often (t_shape at level 5, 60
+        # iterations per stage: 35-36 s against 40.6 and 40.5)
+        os.environ["KMP_BLOCKTIME"] = "1"
+    for name in (os.path.join(os.path.dirname(os.path.realpath(mkl_rt)), "libiomp5.so"), "libiomp5.so"):
+        try:
+            ctypes.CDLL(name)
+            return MKL_THREADING_INTEL
+        except OSError:
+            continue
+    return MKL_THREADING_SEQUENTIAL
+
+
+def factor_threads(n: int) -> int:
+    """Threads a factorization of order ``n`` runs on: the process's
+    (:func:`~tendon_taichi.physics.runtime.factor_threads`) from :data:`PARALLEL_MIN`
+    DOFs, else one."""
+    return runtime.factor_threads() if n >= PARALLEL_MIN else 1
 
 
 class PardisoLDL:
@@ -87,6 +133,7 @@ class PardisoLDL:
         self.ja = np.ascontiguousarray(ja, dtype=np.int32)
         self.n = n
         self.reorder = reorder
+        self.threads = factor_threads(n)
         self.generation = 0
         self._pt = np.zeros(64, dtype=np.int64)
         self._iparm = np.zeros(64, dtype=np.int32)
@@ -117,9 +164,13 @@ class PardisoLDL:
 
     def _call(self, phase: int, b: np.ndarray | None = None) -> tuple[int, np.ndarray | None]:
         before, between, absent = self._fixed_args()
+        pardiso = _load()
+        # every phase on the analysis's threads (on others PARDISO crashes), set for the
+        # calling thread: that wins over the process's MKL threads, which threadpoolctl caps
+        _lib["set_threads"](self.threads)
         x = None if b is None else np.empty_like(b)
         err = ctypes.c_int32(0)
-        _load()(*before, ctypes.byref(ctypes.c_int32(phase)), *between,
+        pardiso(*before, ctypes.byref(ctypes.c_int32(phase)), *between,
                 absent if b is None else ctypes.c_void_p(b.ctypes.data),
                 absent if x is None else ctypes.c_void_p(x.ctypes.data), ctypes.byref(err))
         return err.value, x
@@ -129,6 +180,11 @@ class PardisoLDL:
         """The entries of the Cholesky factor as PARDISO counts them (its supernodes
         padded), from the first factorization on (0 before)."""
         return int(self._iparm[17]) if self._analyzed else 0
+
+    @property
+    def threads_used(self) -> int:
+        """The threads PARDISO ran its last phase on, as it reports them."""
+        return int(self._iparm[2])
 
     def factor(self, data: np.ndarray) -> bool:
         """Factorize the matrix of entries ``data`` (in the pattern's order); whether
@@ -157,6 +213,11 @@ class PardisoLDL:
         state = dict(self.__dict__)
         state.update(_pt=np.zeros(64, dtype=np.int64), _analyzed=False, generation=-1, _args=None)
         return state
+
+    def __setstate__(self, state: dict) -> None:
+        """A copy analyzes on the threads of the process it is in."""
+        self.__dict__.update(state)
+        self.threads = factor_threads(self.n)
 
     def __del__(self):
         try:
