@@ -36,6 +36,7 @@ from pathlib import Path
 from tendon_taichi import load_scene
 from tendon_taichi.apps.bench import run_bench, table
 from tendon_taichi.files import write_json
+from tendon_taichi.solve.pardiso import PARALLEL_MIN
 
 HERE = Path(__file__).resolve().parent
 PAGE = HERE.parent.parent / "docs" / "performance.md"
@@ -134,7 +135,10 @@ def page(result: dict, lines: list[str], plot: str) -> str:
     alone = [alone_line(result["alone"]), ""] if result.get("alone") else []
     return "\n".join([
         INTRO,
-        f"Measured on {m['cores']} cores ({m['cpu']}, Taichi {m['arch']}, Python {m['python']}), "
+        f"Measured on {m['cores']} cores ({m['cpu']}, Taichi {m['arch']}, Python {m['python']}"
+        + (f", PARDISO's factorizations of {PARALLEL_MIN} DOFs or more on {m['factor_threads']} thread(s)"
+           if m.get("pardiso") else "")
+        + "), "
         f"{result['repeat']} repeat(s), at commit `{p['commit']}`{' (with uncommitted changes)' if p['dirty'] else ''} "
         f"on {p['date']}, by `{p['made_by']}`.",
         "", "```text", *lines, *exps, f"compile {result['compile_s']:.1f} s", "```", "",

@@ -37,6 +37,7 @@ from ..optimizer.soft_ik import ADJOINT_TOL, SoftIK
 from ..physics import runtime
 from ..solve.linear import resolve_solver
 from ..solve.newton import NewtonSolver
+from ..solve.pardiso import available as pardiso_available
 from ..tasks.engine import Task, case_id, run_tasks
 from ..version import provenance
 from .baseline import BaselineGradient
@@ -55,7 +56,7 @@ def machine() -> dict:
     except OSError:
         pass
     return {"cores": os.cpu_count(), "cpu": model, "python": platform.python_version(),
-            "platform": platform.platform(), **runtime.info()}
+            "platform": platform.platform(), "pardiso": pardiso_available(), **runtime.info()}
 
 
 def peak_memory_mb() -> float:

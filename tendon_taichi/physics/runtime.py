@@ -244,6 +244,7 @@ def info() -> dict:
         "taichi": ti.__version__ if hasattr(ti, "__version__") else None,
         "init_s": _state["init_s"],
         "blas_threads": _state.get("blas_threads"),
+        "factor_threads": factor_threads(),
     }
 
 
