@@ -95,6 +95,14 @@ def test_bad_command_lines(cli, tmp_path, args, message):
     assert not (tmp_path / "recordings").exists()
 
 
+@pytest.mark.parametrize("name", ["TENDON_TAICHI_FACTOR_THREADS", "TENDON_TAICHI_THREADS",
+                                  "TENDON_TAICHI_PARALLEL_THRESHOLD"])
+def test_a_bad_runtime_variable_is_refused_before_any_work(cli, tmp_path, name):
+    r = cli("optimize", "t_shape", "--quiet", cwd=tmp_path, env={name: "two"})
+    _assert_one_line_error(r, f"{name} must be an integer (got 'two')")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_wrong_length_contract_file(cli, tmp_path):
     np.save(tmp_path / "r.npy", np.zeros(7))
     r = cli("simulate", "t_shape", "--contract", tmp_path / "r.npy", cwd=tmp_path)

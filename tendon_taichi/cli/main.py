@@ -49,6 +49,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise InputError(f"--max-dofs must be >= 1 (got {args.max_dofs})")
             os.environ["TENDON_TAICHI_MAX_DOFS"] = str(args.max_dofs)  # worker processes read it too
         runtime.configure(arch=args.arch, threads=args.threads)
+        runtime.check()
         return int(args.func(args) or 0)
     except TendonError as exc:
         if isinstance(exc, Stopped):

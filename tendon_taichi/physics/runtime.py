@@ -230,7 +230,19 @@ def parallel_threshold() -> int:
     if _settings["parallel_threshold"] is not None:
         return _settings["parallel_threshold"]
     env = os.environ.get("TENDON_TAICHI_PARALLEL_THRESHOLD")
-    return int(env) if env else DEFAULT_PARALLEL_THRESHOLD
+    try:
+        return int(env) if env else DEFAULT_PARALLEL_THRESHOLD
+    except ValueError:
+        raise InputError(f"TENDON_TAICHI_PARALLEL_THRESHOLD must be an integer (got '{env}')") from None
+
+
+def check() -> None:
+    """Refuse a bad setting (an environment variable above) with one clear error,
+    before any work."""
+    _requested_arch()
+    factor_threads()
+    cpu_threads()
+    parallel_threshold()
 
 
 def info() -> dict:
@@ -249,4 +261,4 @@ def info() -> dict:
 
 
 __all__ = ["ti", "configure", "init", "ensure_init", "is_cpu", "host_view", "cpu_threads", "factor_threads",
-           "cores_shared", "share_cores", "parallel_threshold", "info"]
+           "cores_shared", "share_cores", "parallel_threshold", "check", "info"]
