@@ -96,7 +96,7 @@ def test_bad_command_lines(cli, tmp_path, args, message):
 
 
 @pytest.mark.parametrize("name", ["TENDON_TAICHI_FACTOR_THREADS", "TENDON_TAICHI_THREADS",
-                                  "TENDON_TAICHI_PARALLEL_THRESHOLD"])
+                                  "TENDON_TAICHI_PARALLEL_THRESHOLD", "TENDON_TAICHI_BLAS_THREADS"])
 def test_a_bad_runtime_variable_is_refused_before_any_work(cli, tmp_path, name):
     r = cli("optimize", "t_shape", "--quiet", cwd=tmp_path, env={name: "two"})
     _assert_one_line_error(r, f"{name} must be an integer (got 'two')")

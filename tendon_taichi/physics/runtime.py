@@ -69,16 +69,23 @@ def _requested_arch() -> str:
     return arch
 
 
+def _env_int(name: str) -> int | None:
+    """The integer in the environment variable ``name`` (None where it is unset or
+    empty); InputError where it is not an integer."""
+    env = os.environ.get(name)
+    if not env:
+        return None
+    try:
+        return int(env)
+    except ValueError:
+        raise InputError(f"{name} must be an integer (got '{env}')") from None
+
+
 def _requested_threads() -> int | None:
     if _settings["threads"] is not None:
         return _settings["threads"]
-    env = os.environ.get("TENDON_TAICHI_THREADS")
-    if env:
-        try:
-            return max(1, int(env))
-        except ValueError:
-            raise InputError(f"TENDON_TAICHI_THREADS must be an integer (got '{env}')") from None
-    return None
+    n = _env_int("TENDON_TAICHI_THREADS")
+    return None if n is None else max(1, n)
 
 
 def __getattr__(name: str):
@@ -139,11 +146,8 @@ def _limit_blas() -> None:
     """Cap the BLAS thread pools (``TENDON_TAICHI_BLAS_THREADS``, default 1)."""
     from threadpoolctl import threadpool_limits
 
-    env = os.environ.get("TENDON_TAICHI_BLAS_THREADS")
-    try:
-        n = max(1, int(env)) if env else DEFAULT_BLAS_THREADS
-    except ValueError:
-        raise InputError(f"TENDON_TAICHI_BLAS_THREADS must be an integer (got '{env}')") from None
+    n = _env_int("TENDON_TAICHI_BLAS_THREADS")
+    n = DEFAULT_BLAS_THREADS if n is None else max(1, n)
     threadpool_limits(limits=n, user_api="blas")
     _state["blas_threads"] = n
 
@@ -200,13 +204,8 @@ def factor_threads() -> int:
     with the finer mesh's factorizations on two)."""
     if _state["cores_shared"]:
         return 1
-    env = os.environ.get("TENDON_TAICHI_FACTOR_THREADS")
-    if env:
-        try:
-            return max(1, int(env))
-        except ValueError:
-            raise InputError(f"TENDON_TAICHI_FACTOR_THREADS must be an integer (got '{env}')") from None
-    return cpu_threads()
+    n = _env_int("TENDON_TAICHI_FACTOR_THREADS")
+    return cpu_threads() if n is None else max(1, n)
 
 
 @contextlib.contextmanager
@@ -229,11 +228,8 @@ def share_cores() -> None:
 def parallel_threshold() -> int:
     if _settings["parallel_threshold"] is not None:
         return _settings["parallel_threshold"]
-    env = os.environ.get("TENDON_TAICHI_PARALLEL_THRESHOLD")
-    try:
-        return int(env) if env else DEFAULT_PARALLEL_THRESHOLD
-    except ValueError:
-        raise InputError(f"TENDON_TAICHI_PARALLEL_THRESHOLD must be an integer (got '{env}')") from None
+    n = _env_int("TENDON_TAICHI_PARALLEL_THRESHOLD")
+    return DEFAULT_PARALLEL_THRESHOLD if n is None else n
 
 
 def check() -> None:
@@ -243,6 +239,7 @@ def check() -> None:
     factor_threads()
     cpu_threads()
     parallel_threshold()
+    _env_int("TENDON_TAICHI_BLAS_THREADS")
 
 
 def info() -> dict:
