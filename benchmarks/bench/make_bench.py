@@ -137,7 +137,7 @@ def page(result: dict, lines: list[str], plot: str) -> str:
         INTRO,
         f"Measured on {m['cores']} cores ({m['cpu']}, Taichi {m['arch']}, Python {m['python']}"
         + (f", PARDISO's factorizations of {PARALLEL_MIN} DOFs or more on {m['factor_threads']} thread(s)"
-           if m.get("pardiso") else "")
+           if m.get("pardiso_threaded", m.get("pardiso")) else "")
         + "), "
         f"{result['repeat']} repeat(s), at commit `{p['commit']}`{' (with uncommitted changes)' if p['dirty'] else ''} "
         f"on {p['date']}, by `{p['made_by']}`.",

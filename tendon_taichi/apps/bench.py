@@ -38,6 +38,7 @@ from ..physics import runtime
 from ..solve.linear import resolve_solver
 from ..solve.newton import NewtonSolver
 from ..solve.pardiso import available as pardiso_available
+from ..solve.pardiso import threaded as pardiso_threaded
 from ..tasks.engine import Task, case_id, run_tasks
 from ..version import provenance
 from .baseline import BaselineGradient
@@ -56,7 +57,8 @@ def machine() -> dict:
     except OSError:
         pass
     return {"cores": os.cpu_count(), "cpu": model, "python": platform.python_version(),
-            "platform": platform.platform(), "pardiso": pardiso_available(), **runtime.info()}
+            "platform": platform.platform(), "pardiso": pardiso_available(),
+            "pardiso_threaded": pardiso_threaded(), **runtime.info()}
 
 
 def peak_memory_mb() -> float:

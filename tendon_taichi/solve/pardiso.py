@@ -75,13 +75,14 @@ def _load():
         try:
             lib = ctypes.CDLL(name)
             lib.MKL_Set_Threading_Layer.argtypes = [ctypes.c_int]
-            lib.MKL_Set_Threading_Layer(_threading_layer(name))
+            layer = _threading_layer(name)
+            lib.MKL_Set_Threading_Layer(layer)
             lib.MKL_Set_Num_Threads_Local.argtypes = [ctypes.c_int]
             fn = lib.pardiso
         except (OSError, AttributeError):  # not there, or not an MKL runtime we know
             continue
         fn.restype = None
-        _lib["set_threads"] = lib.MKL_Set_Num_Threads_Local
+        _lib.update(set_threads=lib.MKL_Set_Num_Threads_Local, threaded=layer == MKL_THREADING_INTEL)
         break
     _lib["pardiso"] = fn
     return fn
@@ -90,6 +91,12 @@ def _load():
 def available() -> bool:
     """Whether MKL PARDISO loaded (the ``mkl`` extra is installed)."""
     return _load() is not None
+
+
+def threaded() -> bool:
+    """Whether PARDISO can run on several threads (it loaded, with MKL's Intel
+    OpenMP layer); else every factorization runs on one, whatever is asked."""
+    return _load() is not None and _lib["threaded"]
 
 
 def _threading_layer(mkl_rt: str) -> int:
