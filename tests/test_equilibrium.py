@@ -265,8 +265,9 @@ def test_pardiso_solves_as_qdldl_does_and_the_same_every_time(monkeypatch):
 
 def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatch):
     """A lattice's Hessian (t_shape at level 3, 2716 DOFs) factorized by PARDISO on
-    1, 2 and 3 threads solves to the same bits; a process factorizes a matrix above
-    the parallel threshold on its threads only while it has its cores to itself."""
+    1, 2 and 3 threads, in its own order or PARDISO's, solves to the same bits; a
+    process factorizes a matrix above the parallel threshold on its threads only
+    while it has its cores to itself."""
     from tendon_taichi.physics import runtime
     from tendon_taichi.solve import pardiso
 
@@ -277,15 +278,16 @@ def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatc
     H = DirectSolver(m).assemble_ordered().Hp
     n = H.shape[0]
     b = np.random.default_rng(0).standard_normal(n)
-    solutions = []
-    for threads in (1, 2, 3):
-        ldl = pardiso.PardisoLDL(H.indptr, H.indices, n)
-        ldl.threads = threads
-        assert ldl.factor(H.data) and ldl.factor(H.data)
-        assert ldl.threads_used == (threads if pardiso.threaded() else 1)
-        solutions.append(ldl.solve(b))
-        assert np.linalg.norm(H @ solutions[-1] - b) <= 1e-10 * np.linalg.norm(b)
-    assert all(np.array_equal(solutions[0], y) for y in solutions[1:])
+    for reorder in (False, True):  # the pattern's order (a lattice's), PARDISO's own (a tendon robot's)
+        solutions = []
+        for threads in (1, 2, 3):
+            ldl = pardiso.PardisoLDL(H.indptr, H.indices, n, reorder=reorder)
+            ldl.threads = threads
+            assert ldl.factor(H.data) and ldl.factor(H.data)
+            assert ldl.threads_used == (threads if pardiso.threaded() else 1)
+            solutions.append(ldl.solve(b))
+            assert np.linalg.norm(H @ solutions[-1] - b) <= 1e-10 * np.linalg.norm(b)
+        assert all(np.array_equal(solutions[0], y) for y in solutions[1:])
 
     monkeypatch.setenv("TENDON_TAICHI_FACTOR_THREADS", "3")
     large = pardiso.PARALLEL_MIN
