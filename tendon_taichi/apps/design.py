@@ -15,7 +15,6 @@ against tendon count)."""
 from __future__ import annotations
 
 import json
-import os
 import tempfile
 import time
 from dataclasses import dataclass
@@ -124,8 +123,7 @@ MAX_DEFAULT_WORKERS = 4
 def default_workers() -> int:
     """Worker processes ``design`` starts by default: one per core it may use but
     the one it runs on, at most :data:`MAX_DEFAULT_WORKERS`."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return max(0, min(cores - 1, MAX_DEFAULT_WORKERS))
+    return max(0, min(runtime.cores() - 1, MAX_DEFAULT_WORKERS))
 
 
 def start_worker(threads: int | None, arch: str | None = None, warm: bool = True) -> dict:

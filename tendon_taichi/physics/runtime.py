@@ -185,13 +185,16 @@ def host_view(arr) -> "np.ndarray | None":
     return np.frombuffer(raw, dtype=dtype)
 
 
+def cores() -> int:
+    """The cores this process may run on (its CPU affinity where the OS has one)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
 def cpu_threads() -> int:
     """Threads a process's parallel CPU work may use: ``--threads`` (or
-    ``TENDON_TAICHI_THREADS``) where given, else the cores it may run on."""
+    ``TENDON_TAICHI_THREADS``) where given, else :func:`cores`."""
     requested = _requested_threads()
-    if requested is not None:
-        return requested
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return cores() if requested is None else requested
 
 
 def factor_threads() -> int:
@@ -257,5 +260,5 @@ def info() -> dict:
     }
 
 
-__all__ = ["ti", "configure", "init", "ensure_init", "is_cpu", "host_view", "cpu_threads", "factor_threads",
+__all__ = ["ti", "configure", "init", "ensure_init", "is_cpu", "host_view", "cores", "cpu_threads", "factor_threads",
            "cores_shared", "share_cores", "parallel_threshold", "check", "info"]

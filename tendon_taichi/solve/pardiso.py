@@ -34,8 +34,8 @@ factors of t_shape's lattices at levels 2-6 solve to the same bits on one thread
 and on two (level 5 also on 3, 4 and 8), and so do those of tendon robots in
 PARDISO's own order (finger at level 5, t_shape at 4; 1-3 threads), with MKL's
 Intel OpenMP layer (its GNU layer gives other bits, even on one thread);
-``tests/test_equilibrium.py`` checks it. A PARDISO handle runs every phase on the threads of its analysis (on
-others it crashes).
+``tests/test_equilibrium.py`` checks it. A PARDISO handle runs every phase on
+the threads of its analysis (on others it crashes).
 """
 
 from __future__ import annotations
