@@ -2,7 +2,8 @@
 splines become exact Bezier paths, the clearance is held, a join across a
 body with a hole is smooth or not made, and the route gradient (control
 points, anchor and pull end, contractions) matches central differences - with
-friction, the bend penalty and the clearance penalty all active."""
+friction and the bend penalty active - as does the clearance constraint's
+Jacobian, and route optimization ends at routes that keep the clearance."""
 
 import numpy as np
 import pytest
@@ -127,8 +128,9 @@ def test_turning_and_bend_penalties_match_finite_differences():
 
 def test_route_gradient_matches_central_differences():
     """d O / d (control points, anchor and pull end included, and contractions) of
-    the route objective - the as-built pose with friction, the friction price, the
-    bend and clearance penalties - against central differences."""
+    the route objective - the as-built pose with friction, the friction price and
+    the bend penalty - against central differences; and the Jacobian of the
+    clearance constraint (a pull end too near the wall: it is violated there)."""
     p = build_problem(load_scene("t_shape"), 1)
     L = p.size
     t = np.linspace(0, 1, 12)
@@ -136,7 +138,7 @@ def test_route_gradient_matches_central_differences():
              np.stack([0.004 * np.sin(3 * t), 0.01 + 0.05 * t], 1)]
     routes = [fit_route(q, L, 0.4) for q in paths]
     routes[1].control[2:4] += [[0.015, 0.0], [-0.015, 0.0]]  # a sharp bend (the penalty is on) ...
-    routes[0].control[-1] = [0.045, 0.0785]  # ... and a pull end too near the wall (the clearance term is on)
+    routes[0].control[-1] = [0.045, 0.0785]  # ... and a pull end too near the wall (the constraint is violated)
     rs = RouteSettings(friction=0.3, clearance=0.02 * L, friction_price=1e-4)
     obj = RouteObjective(p, routes, p.scene.optimize, rs, "direct")
     obj.eval_tol = 1e-14
@@ -153,6 +155,38 @@ def test_route_gradient_matches_central_differences():
         e[j] = h
         fd = (obj.evaluate(z + e)[0] - obj.evaluate(z - e)[0]) / (2 * h)
         assert g[j] == pytest.approx(fd, rel=2e-5, abs=1e-9 * np.abs(g).max()), j
+    c, J = obj.clearance(z)
+    assert c.min() < 0.0 and np.array_equal(c, obj.clearance(z, jacobian=False)[0])
+    h = 1e-7
+    for j in range(n):
+        e = np.zeros_like(z)
+        e[j] = h
+        ahead, back = ((obj.clearance(z + s * e, jacobian=False)[0] - c) / (s * h) for s in (1, -1))
+        smooth = np.abs(ahead - back) <= 1e-6  # not on the walls' medial axis (route 1 starts on it)
+        assert smooth.sum() >= len(c) - 1
+        assert np.abs(J[smooth, j] - (ahead + back)[smooth] / 2).max() <= 1e-6, j
+    assert not J[:, n:].any()  # the contractions move no waypoint
+
+
+def test_route_optimization_keeps_the_clearance_where_the_best_route_would_not():
+    """An arm route whose optimum with a clearance of 0.04 L lies against the wall:
+    optimized with none, it passes nearer the wall than that; with it, it ends at the
+    clearance (within CLEAR_TOL) and its objective still falls by 98 %."""
+    from tendon_taichi.extract.routing import CLEAR_TOL, optimize_routes
+
+    p = build_problem(load_scene("t_shape"), 1)
+    t = np.linspace(0, 1, 12)
+    route = fit_route(np.stack([0.04 * t, 0.075 - 0.004 * np.sin(np.pi * t)], 1), p.size, 0.4)
+    c = 0.04 * p.size
+    route = keep_clear(route, p.walls, c)
+    ends = []
+    for clearance in (0.0, c):
+        rs = RouteSettings(friction=0.3, clearance=clearance, iterations=15)
+        res = optimize_routes(p, [route], np.array([[0.08]]), p.scene.optimize, rs, "direct")
+        assert res.objective < 0.02 * res.objective_start
+        ends.append(p.walls.distance(res.routes[0].waypoints).min())
+    assert ends[0] < 0.9 * c  # the constraint binds ...
+    assert c * (1 - CLEAR_TOL) <= ends[1] <= c * (1 + 1e-3)  # ... and holds
 
 
 def test_a_route_shrunk_to_a_point_is_a_step_too_far():

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 TOLERANCE = 1.0e-3
 BUDGET = 5.0e-3
 GAP = 0.2
-#: rounds of route optimization (each at most RouteSettings.iterations L-BFGS-B iterations)
+#: rounds of route optimization (each at most RouteSettings.iterations SLSQP iterations)
 REFINE = 2
 #: drop and join candidates solved in full per round (the best screened; 0: all, unscreened)
 SCREEN = 4
