@@ -121,7 +121,8 @@ def test_planted_bench_command_on_one_case(tmp_path):
     assert set(case["extractors"]) >= {"strands", "network_discovery", "path_cover"}
     assert case["passed"] and route_rule(case), case
     assert case["count"] <= 2 and case["realizable_pose_error_rel"] <= 0.01 and case["length_ratio"] <= 2.0
-    assert case["count"] == len(case["tendons"]) and case["best"] in case["extractors"]
+    assert case["count"] == len(case["tendons"])
+    assert all(s in case["extractors"] or s == "join" for s in case["best"].split("+"))  # where its routes came from
     assert case["length_ratio"] == pytest.approx(case["active_length"] / case["planted_length"])
     assert case["front"] and case["planted_as_built_error_rel"] is not None
     assert case["clearance_min"] >= 0.02 * 0.9 * 0.128  # 2 % of L (this snake is about 13 cm across)
