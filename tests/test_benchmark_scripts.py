@@ -30,7 +30,7 @@ def test_every_script_has_a_test():
     tested = {"simulate_levels.py", "how_it_works/make_figure.py", "planted/make_suite.py", "planted/reextract.py",
               "planted/counts_by_level.py", "sweeps/dask_overhead.py", "bench/make_bench.py",
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
-              "realizable_side_by_side.py", "planted/held_out.py"}
+              "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py"}
     assert scripts == tested
 
 
@@ -41,6 +41,15 @@ def test_realizable_side_by_side_solves_each_robot_both_ways():
     assert out[1].startswith("Gauss-Newton worse by > 1e-07 L:")
     lbfgsb, gn = (int(ln.split()[-4]) for ln in out[2:4])
     assert out[2].startswith("L-BFGS-B:") and out[3].startswith("Gauss-Newton:") and gn < lbfgsb
+
+
+def test_routes_side_by_side_runs_each_route_optimization_both_ways():
+    out = run(BENCH / "routes_side_by_side.py", "t_shape", 1, "--stage-iterations", 25, "--k-min", 0.1,
+              "--extractors", "strands", "--refine", 1, "--beam", 1, "--no-converge").stdout.splitlines()[-4:]
+    assert out[0].startswith("route optimizations:") and int(out[0].split()[2]) > 0
+    assert out[1].startswith("SLSQP lower:")
+    (old, new) = (int(ln.split(": ")[1].split()[0]) for ln in out[2:4])
+    assert out[2].startswith("L-BFGS-B, penalty:") and out[3].startswith("SLSQP, constraint:") and old > 0 < new
 
 
 def test_simulate_levels_prints_each_level_and_solver():
