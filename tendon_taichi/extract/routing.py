@@ -196,17 +196,16 @@ class RouteObjective:
         routes, _ = self.unpack(z)
         values, rows, at = [], [], 0
         for r in routes:
-            if not jacobian:
-                values.append((self.walls.distance(r.waypoints) - self.rs.clearance) / self.L)
-                continue
-            d, g = self.walls.distance_gradient(r.waypoints)
-            # waypoint i is sum_j B_ij c_j, and z holds c / L: d(d_i / L)/dz_j = B_ij g_i
-            J = np.zeros((len(d), len(z)))
-            block = (r.basis[:, :, None] * g[:, None, :]).reshape(len(d), -1)
-            J[:, at:at + block.shape[1]] = block
-            at += block.shape[1]
+            if jacobian:
+                d, g = self.walls.distance_gradient(r.waypoints)
+                # waypoint i is sum_j B_ij c_j, and z holds c / L: d(d_i / L)/dz_j = B_ij g_i
+                J = np.zeros((len(d), len(z)))
+                J[:, at:at + r.control.size] = (r.basis[:, :, None] * g[:, None, :]).reshape(len(d), -1)
+                rows.append(J)
+            else:
+                d = self.walls.distance(r.waypoints)
             values.append((d - self.rs.clearance) / self.L)
-            rows.append(J)
+            at += r.control.size
         return np.concatenate(values), (np.vstack(rows) if jacobian else None)
 
     # ------------------------------------------------------------ evaluation
@@ -284,6 +283,12 @@ def optimize_routes(problem: Problem, routes: list[Route], ratios: np.ndarray, s
     lowest = {"f": np.inf, "z": z0}  # ... and the best of all, should none keep it
     last: dict = {}
     margin = -CLEAR_TOL * route_settings.clearance / obj.L
+    kept: dict = {}
+
+    def clearance(z):  # the constraint's values at z, once per point (SLSQP asks after fun did)
+        if "z" not in kept or not np.array_equal(z, kept["z"]):
+            kept.update(z=np.array(z), values=obj.clearance(z, jacobian=False)[0])
+        return kept["values"]
 
     def fun(z):
         if "z" in last and np.array_equal(z, last["z"]):  # SLSQP starts where we did
@@ -296,7 +301,7 @@ def optimize_routes(problem: Problem, routes: list[Route], ratios: np.ndarray, s
         last.update(z=np.array(z), f=f, g=g.copy())
         if f < lowest["f"]:
             lowest.update(f=f, z=np.array(z))
-        if f < best["f"] and obj.clearance(z, jacobian=False)[0].min() >= margin:
+        if f < best["f"] and clearance(z).min() >= margin:
             best.update(f=f, z=np.array(z))
         return f, g
 
@@ -308,9 +313,8 @@ def optimize_routes(problem: Problem, routes: list[Route], ratios: np.ndarray, s
         if on_iteration is not None:
             on_iteration(it["k"], best["f"])
 
-    clearance = {"type": "ineq", "fun": lambda z: obj.clearance(z, jacobian=False)[0],
-                 "jac": lambda z: obj.clearance(z)[1]}
-    res = so.minimize(fun, z0, jac=True, method="SLSQP", bounds=obj.bounds(), constraints=[clearance],
+    constraint = {"type": "ineq", "fun": clearance, "jac": lambda z: obj.clearance(z)[1]}
+    res = so.minimize(fun, z0, jac=True, method="SLSQP", bounds=obj.bounds(), constraints=[constraint],
                       callback=callback, options={"maxiter": route_settings.iterations, "ftol": 1e-12})
     found = best if np.isfinite(best["f"]) else lowest
     out_routes, out_ratios = obj.unpack(found["z"])
