@@ -1,7 +1,12 @@
 """Writing files safely: every output is written to a temporary name beside its
 destination and renamed into place, so an interrupted or failed run never
 leaves a half-written file; a file that several processes rewrite (a run's
-recording) is rewritten under a lock, from an unnamed temporary file."""
+recording) is rewritten under a lock, from an unnamed temporary file.
+
+A destination that is a symbolic link is written through it (the link stays,
+its target is replaced, as a shell's ``>`` would write it); one that exists and
+is no regular file - a device such as ``/dev/null`` or ``/dev/stdout``, a named
+pipe - is written into once the output is complete, never replaced."""
 
 from __future__ import annotations
 
@@ -9,6 +14,8 @@ import errno
 import json
 import os
 import re
+import shutil
+import stat
 import tempfile
 import uuid
 from contextlib import contextmanager
@@ -25,11 +32,15 @@ except ImportError:  # Windows: no advisory locks; writes stay atomic
 
 def check_writable(path: str | Path, what: str = "output") -> None:
     """Raise InputError, before any work, when a file cannot be written at ``path``
-    (its folder cannot be made or written, or it is a folder); leaves nothing behind
-    but the folders it made."""
-    path = Path(path)
+    (its folder cannot be made or written, or it is a folder; a stream, when it is
+    not writable); leaves nothing behind but the folders it made."""
+    path = destination(path)
     if path.is_dir():
         raise InputError(f"the {what} '{path}' is a folder")
+    if is_stream(path):
+        if not os.access(path, os.W_OK):
+            raise InputError(f"cannot write the {what} '{path}': permission denied")
+        return
     above = next((f for f in path.parents if f.exists()), None)
     if above is not None and not above.is_dir():
         raise InputError(f"cannot write the {what} '{path}': '{above}' is a file, not a folder")
@@ -41,11 +52,33 @@ def check_writable(path: str | Path, what: str = "output") -> None:
         raise InputError(f"cannot write the {what} '{path}': {exc.strerror or exc}") from None
 
 
+def destination(path: str | Path) -> Path:
+    """The file that writing ``path`` replaces: a symbolic link's target, else ``path``."""
+    path = Path(path)
+    return Path(os.path.realpath(path)) if path.is_symlink() else path
+
+
+def is_stream(path: str | Path) -> bool:
+    """Whether ``path`` exists and is neither a regular file nor a folder (a device,
+    a named pipe, a socket): written into, it cannot be replaced."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
+
+
 @contextmanager
 def atomic_path(path: str | Path):
     """Yield a temporary path in the destination's folder; rename it to ``path``
-    when the block succeeds, delete it when it fails."""
-    path = Path(path)
+    when the block succeeds, delete it when it fails. A stream ``path``
+    (:func:`is_stream`) gets the temporary file's bytes written into it instead
+    (the temporary file then lies in the system's temporary folder)."""
+    path = destination(path)
+    if is_stream(path):
+        with _staged_for_stream(path) as tmp:
+            yield tmp
+        return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -59,6 +92,20 @@ def atomic_path(path: str | Path):
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+@contextmanager
+def _staged_for_stream(path: Path):
+    """A temporary path in the system's temporary folder whose bytes go into the stream
+    ``path`` when the block succeeds."""
+    fd, tmp = tempfile.mkstemp(prefix=".tendon-taichi.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        with open(tmp, "rb") as src, open(path, "wb") as dst:
+            shutil.copyfileobj(src, dst)
+    finally:
+        os.unlink(tmp)
 
 
 @contextmanager
@@ -97,8 +144,13 @@ def replace_with_bytes(path: str | Path, data: bytes) -> None:
     """Replace the file ``path`` by one holding ``data``, atomically: a process
     killed at any moment leaves the old file or the new one. The data go to an
     unnamed file (O_TMPFILE) that gets a name only to be renamed over ``path``
-    (elsewhere, a named temporary file); leftovers of killed writers are removed."""
-    path = Path(path)
+    (elsewhere, a named temporary file); leftovers of killed writers are removed.
+    A stream ``path`` (:func:`is_stream`) has ``data`` written into it."""
+    path = destination(path)
+    if is_stream(path):
+        with open(path, "wb") as fh:
+            fh.write(data)
+        return
     _remove_stale_temporaries(path)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}.{uuid.uuid4().hex[:8]}{path.suffix}")
     fd = _unnamed_file(path.parent)
