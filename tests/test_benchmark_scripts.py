@@ -30,7 +30,8 @@ def test_every_script_has_a_test():
     tested = {"simulate_levels.py", "how_it_works/make_figure.py", "planted/make_suite.py", "planted/reextract.py",
               "planted/counts_by_level.py", "sweeps/dask_overhead.py", "bench/make_bench.py",
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
-              "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py"}
+              "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
+              "secant_replay.py"}
     assert scripts == tested
 
 
@@ -50,6 +51,16 @@ def test_routes_side_by_side_runs_each_route_optimization_both_ways():
     assert out[1].startswith("SLSQP lower:")
     (old, new) = (int(ln.split(": ")[1].split()[0]) for ln in out[2:4])
     assert out[2].startswith("L-BFGS-B, penalty:") and out[3].startswith("SLSQP, constraint:") and old > 0 < new
+
+
+def test_secant_replay_solves_the_same_evaluations_both_ways():
+    out = run(BENCH / "secant_replay.py", "t_shape", 1, "--stage-iterations", 25, "--k-min", 0.1,
+              "--repeat", 1).stdout.splitlines()[-4:]
+    assert out[0].startswith("evaluations:") and int(out[0].split()[1]) > 0
+    assert out[1].startswith("plain chord steps:") and out[2].startswith("secant-corrected:")
+    assert all(int(part.split()[0]) > 0 for ln in out[1:3] for part in ln.split(", ")[1:])  # factorizations, chords
+    # the equilibria agree to Newton's tolerance (1e-8 of the force scale), the pose term to ~1e-5
+    assert out[3].startswith("objectives agree to:") and float(out[3].split()[3]) <= 1e-4
 
 
 def test_simulate_levels_prints_each_level_and_solver():

@@ -373,6 +373,15 @@ class DirectSolver(LinearSolver):
         out[self.free] = self.factor.solve(np.asarray(rhs, dtype=float).ravel()[self.free])
         return out.reshape(-1, 2)
 
+    def chord_solve(self, rhs: np.ndarray) -> np.ndarray | None:
+        """A chord step's solve with the last factorization, where it is of an exact Hessian."""
+        if not self.factor_exact:
+            return None
+        out = self.approx_solve(rhs)
+        if out is not None:
+            self.stats.reused += 1
+        return out
+
     def reset(self) -> None:
         """Forget the last factorization."""
         self.factor = None

@@ -89,6 +89,12 @@ class LinearSolver(ABC):
         """H0^-1 rhs (n, 2) with the factorization at hand (of a nearby state's
         Hessian), or None when there is none: for first-order predictions."""
 
+    def chord_solve(self, rhs: np.ndarray) -> np.ndarray | None:
+        """H0^-1 rhs (n, 2) with the factorization that Newton's chord steps reuse (of
+        the exact Hessian at a nearby state), or None when there is none at hand or
+        the backend takes no chord steps (the default)."""
+        return None
+
     @abstractmethod
     def solve_many(self, rhs: Iterable[np.ndarray], tol: float) -> Iterator[np.ndarray]:
         """y (n, 2) with H y = b for each b (n, 2) of ``rhs``, H the Hessian at the
