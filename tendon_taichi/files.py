@@ -53,9 +53,13 @@ def check_writable(path: str | Path, what: str = "output") -> None:
 
 
 def destination(path: str | Path) -> Path:
-    """The file that writing ``path`` replaces: a symbolic link's target, else ``path``."""
+    """The file that writing ``path`` replaces: a symbolic link's target, else ``path``
+    (a stream, :func:`is_stream`, as given: opening it follows the links, which
+    ``/dev/stdout``'s may not name a path)."""
     path = Path(path)
-    return Path(os.path.realpath(path)) if path.is_symlink() else path
+    if is_stream(path) or not path.is_symlink():
+        return path
+    return Path(os.path.realpath(path))
 
 
 def is_stream(path: str | Path) -> bool:

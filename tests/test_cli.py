@@ -1,6 +1,9 @@
 """The command line as a user runs it: outputs, formats and bad input."""
 
+import importlib
 import json
+import subprocess
+import sys
 from importlib.metadata import entry_points
 from pathlib import Path
 
@@ -16,6 +19,27 @@ from tendon_taichi.io.export import EXPORT_KEYS
 def test_console_script_is_installed():
     eps = [e for e in entry_points(group="console_scripts") if e.name == "tendon-taichi"]
     assert eps and eps[0].value == "tendon_taichi.cli:main"
+
+
+def test_a_reader_that_stops_early_ends_the_command_quietly():
+    """``tendon-taichi scenes --json | head -c0``: exit status 141 (SIGPIPE's), no traceback, no
+    'internal error'."""
+    p = subprocess.Popen([sys.executable, "-m", "tendon_taichi", "scenes", "--json"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()  # before the command prints
+    err = p.stderr.read().decode()
+    assert p.wait(120) == 141
+    assert err == "", err
+
+
+def test_a_broken_pipe_that_is_not_stdout_is_an_internal_error(monkeypatch, capsys):
+    cli_main = importlib.import_module("tendon_taichi.cli.main")
+
+    def broken():
+        raise BrokenPipeError("a worker's pipe")
+    monkeypatch.setattr(cli_main.runtime, "check", broken)
+    assert cli_main.main(["scenes"]) == 1
+    assert "internal error: BrokenPipeError: a worker's pipe" in capsys.readouterr().err
 
 
 def test_scenes_lists_builtins(cli):

@@ -67,3 +67,13 @@ def test_the_command_line_writes_json_into_a_named_pipe(cli, tmp_path):
     assert r.returncode == 0, r.stderr
     assert "t_shape" in {s["name"] for s in json.loads(got[0])["scenes"]}
     assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/stdout"), reason="no /dev/stdout")
+def test_json_into_dev_stdout_reaches_the_pipe_behind_it(cli):
+    """/dev/stdout is a link to /proc/self/fd/1, whose own link names no path where stdout
+    is a pipe: written into as a stream, it is not resolved."""
+    r = cli("scenes", "--json", "/dev/stdout")
+    assert r.returncode == 0, r.stderr
+    data, _ = json.JSONDecoder().raw_decode(r.stdout)  # then the command's "wrote /dev/stdout"
+    assert "t_shape" in {s["name"] for s in data["scenes"]}

@@ -4,19 +4,53 @@ one place where errors become exit statuses.
 Results go to stdout (``--json`` for machines, to stdout or a file), progress
 and warnings to stderr. Bad input gives one ``tendon-taichi: error: ...`` line
 and exit status 2; an unexpected failure one ``internal error`` line and 1
-(``--debug`` shows the traceback); Ctrl-C exits 130.
+(``--debug`` shows the traceback); Ctrl-C exits 130; a reader of stdout that
+stops early (``tendon-taichi scenes --json | head``) ends the command quietly
+with 141, as SIGPIPE ends other tools (the files it wrote stay).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import select
 import sys
 
 from ..errors import InputError, Stopped, TendonError
 from ..physics import runtime
 from . import batch, design, runs, tendons
 from .common import PROG, Parser
+
+
+#: the exit status when stdout's reader went away (128 + SIGPIPE, as a shell reports it)
+BROKEN_PIPE = 141
+
+
+def _stdout_reader_gone() -> bool:
+    """Whether stdout is a pipe or socket whose reading end was closed (a broken pipe
+    elsewhere - a worker's - is a bug to report, not this)."""
+    try:
+        poll = select.poll()
+        poll.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poll.poll(0))
+    except (OSError, ValueError, AttributeError):  # no file descriptor behind sys.stdout, no poll
+        return False
+
+
+def _stdout_to_devnull() -> None:
+    """Point stdout at /dev/null, so that flushing it at exit does not fail again."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+
+
+def _internal_error(exc: Exception, debug: bool) -> int:
+    if debug:
+        raise exc
+    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    print(f"{PROG}: internal error: {type(exc).__name__}: {msg} "
+          f"(run with --debug for the traceback)", file=sys.stderr)
+    return 1
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -60,15 +94,15 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError as exc:
+        if not _stdout_reader_gone():
+            return _internal_error(exc, debug)
+        _stdout_to_devnull()
+        return BROKEN_PIPE
     except SystemExit as exc:  # --help
         return int(exc.code or 0)
     except Exception as exc:  # noqa: BLE001 - the one place that turns bugs into one line
-        if debug:
-            raise
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        print(f"{PROG}: internal error: {type(exc).__name__}: {msg} "
-              f"(run with --debug for the traceback)", file=sys.stderr)
-        return 1
+        return _internal_error(exc, debug)
 
 
 if __name__ == "__main__":
