@@ -11,7 +11,7 @@
   triangle (``det F <= 0``);
 * converged when ``|g_free| <= tol * F`` with the force scale ``F = E h L``;
 * with ``reuse`` (chord steps on the direct backend's last factorization ``H0``,
-  while the residual keeps shrinking fast) a chord step after the first is
+  while the residual keeps shrinking fast) a fiber lattice's chord step after the first is
   corrected by the secant pairs of the steps since ``H0`` was made
   (:mod:`.secant`), and the factorization is refreshed only when a step leaves
   more than 0.7 of the residual (0.5 after plain chord steps): the same
@@ -64,8 +64,11 @@ class NewtonSolver:
     direct backend reuse its last factorization (chord steps) while the residual
     keeps shrinking at least by ``chord_ratio`` per step - for sequences of nearby
     solves, as in the optimizer -, its chord steps corrected by secant pairs
-    (:mod:`.secant`) where the model has no friction (whose Jacobian is not the
-    symmetric Hessian that the pairs approximate).
+    (:mod:`.secant`) where the cables are one segment each (the fiber lattice,
+    where that was measured to pay). A tendon robot keeps plain chord steps:
+    with friction its Jacobian is not the symmetric Hessian the pairs
+    approximate, and without, its searches compare pose errors of a few 1e-7 L,
+    at the tolerance of the equilibria inside them, which the corrections move.
     """
 
     def __init__(self, model: Model, solver: str | LinearSolver = "auto", tol: float = 1e-10,
@@ -109,7 +112,7 @@ class NewtonSolver:
         tol = self.tol if tol is None else tol
         projected = 0
         gnorm, fresh = np.inf, False
-        secant = self.reuse and self.secant_pairs > 0 and m.capstan is None
+        secant = self.reuse and self.secant_pairs > 0 and m.single
         memory = SecantMemory(np.repeat(~m.fixed, 2), self.secant_pairs) if secant else None
         for it in range(self.max_iter + 1):
             if m.capstan is not None and m.update_friction() > 0.0:
