@@ -83,8 +83,9 @@ class NewtonSolver:
         self.chord_ratio = 0.5
         #: ... and a secant-corrected one this much: the corrections speed the next
         #: steps up, where plain chord steps keep their rate. Replaying the same 1846
-        #: evaluations of t_shape at level 5: 0.5 / 0.7 / 0.9 take 35.6 / 33.6 / 33.0 s
-        #: (plain chord steps at 0.5: 38.3 s); at levels 2 and 3 0.5 and 0.7 are alike
+        #: evaluations of t_shape at level 5 (as benchmarks/secant_replay.py does): 0.5 /
+        #: 0.7 / 0.9 take 35.6 / 33.6 / 33.0 s (plain chord steps at 0.5: 38.3 s); at
+        #: levels 2 and 3 0.5 and 0.7 are alike
         self.secant_chord_ratio = 0.7
         self.reuse = reuse
         #: secant pairs that correct the chord steps (0: plain chord steps)
