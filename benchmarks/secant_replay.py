@@ -77,7 +77,7 @@ def replay(made: tuple, calls: list, secant: bool) -> tuple[float, int, int, np.
     return seconds, sum(s.solves for s in stats), sum(s.reused for s in stats), np.array(values)
 
 
-def main_(argv: list[str]) -> None:
+def run(argv: list[str]) -> None:
     repeat = 2
     if "--repeat" in argv:
         i = argv.index("--repeat")
@@ -93,7 +93,7 @@ def main_(argv: list[str]) -> None:
             runs[secant].append(replay(made, calls, secant))
     print(f"evaluations: {sum(name == 'evaluate' for name, _ in calls)} ({scene} level {level})")
     for secant, label in ((False, "plain chord steps"), (True, "secant-corrected")):
-        seconds, factorizations, chords, _ = runs[secant][0]
+        _, factorizations, chords, _ = runs[secant][0]
         median = float(np.median([r[0] for r in runs[secant]]))
         print(f"{label}: {median:.2f} s, {factorizations} factorizations, {chords} chord solves")
     plain, corrected = runs[False][0][3], runs[True][0][3]
@@ -101,4 +101,7 @@ def main_(argv: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main_(sys.argv[1:])
+    if len(sys.argv) < 2:
+        print(__doc__.split("\n\n")[1], file=sys.stderr)
+        sys.exit(2)
+    run(sys.argv[1:])
