@@ -31,7 +31,7 @@ def test_every_script_has_a_test():
               "planted/counts_by_level.py", "sweeps/dask_overhead.py", "bench/make_bench.py",
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
-              "secant_replay.py"}
+              "secant_replay.py", "route_replay.py"}
     assert scripts == tested
 
 
@@ -61,6 +61,17 @@ def test_secant_replay_solves_the_same_evaluations_both_ways():
     assert all(int(part.split()[0]) > 0 for ln in out[1:3] for part in ln.split(", ")[1:])  # factorizations, chords
     # the equilibria agree to Newton's tolerance (1e-8 of the force scale), the pose term to ~1e-5
     assert out[3].startswith("objectives agree to:") and float(out[3].split()[3]) <= 1e-4
+
+
+def test_route_replay_runs_every_route_optimization_both_ways():
+    out = run(BENCH / "route_replay.py", "t_shape", 1, "--stage-iterations", 25, "--k-min", 0.1,
+              "--extractors", "strands", "--refine", 1, "--beam", 1, "--no-converge",
+              "--repeat", 1).stdout.splitlines()[-4:]
+    assert out[0].startswith("route optimizations:") and int(out[0].split()[2]) > 0
+    assert out[1].startswith("every pattern made anew:") and out[2].startswith("detached segments:")
+    assert all(int(ln.split(", ")[1].split()[0]) > 0 for ln in out[1:3])  # evaluations
+    # the same optimizations from the same starts, the Hessians equal to round-off
+    assert out[3].startswith("summed objectives agree to:") and float(out[3].split()[4]) <= 1e-3
 
 
 def test_simulate_levels_prints_each_level_and_solver():

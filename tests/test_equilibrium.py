@@ -263,6 +263,43 @@ def test_pardiso_solves_as_qdldl_does_and_the_same_every_time(monkeypatch):
     assert f1 == f2 and np.array_equal(g1, g2)
 
 
+@pytest.mark.parametrize("cholesky", ["qdldl", "pardiso"])
+def test_several_right_hand_sides_solve_in_one_call_as_one_by_one(monkeypatch, cholesky):
+    """A factorization solves the columns of an (n, r) right-hand side in one call
+    (the Woodbury columns of a tendon robot) as it solves each alone, to
+    round-off, and each to the residual of the matrix it factorized."""
+    from scipy import sparse
+
+    kind = use_cholesky(monkeypatch, cholesky)
+    n = 200
+    A = sparse.random(n, n, 0.03, random_state=2)
+    A = (A + A.T + 8.0 * sparse.eye(n)).tocsc()
+    A.sort_indices()
+    ldl = kind(A.indptr, A.indices, n, True)
+    assert ldl.factor(A.data)
+    B = np.random.default_rng(3).normal(size=(n, 4))
+    X = ldl.solve(B)
+    one_by_one = np.column_stack([ldl.solve(b) for b in B.T])
+    assert X.shape == B.shape and np.abs(X - one_by_one).max() <= 1e-13 * np.abs(X).max()
+    assert np.abs(A @ X - B).max() <= 1e-12 * np.abs(B).max()
+
+
+def test_every_blas_is_capped_however_late_it_loads():
+    """Starting the runtime caps every BLAS thread pool to one thread, scipy's own
+    too when it is imported afterwards: an idle BLAS thread that spins holds the
+    core a factorization's second thread waits for (a level-4 tendon robot's
+    factorization took 33 ms instead of 1.5)."""
+    import subprocess
+    import sys
+
+    code = ("from tendon_taichi.physics import runtime; runtime.init(); import scipy.sparse.linalg; "
+            "from threadpoolctl import threadpool_info; "
+            "print([d['num_threads'] for d in threadpool_info() if d['user_api'] == 'blas'])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    counts = eval(out.stdout.strip().splitlines()[-1])
+    assert counts and all(c == 1 for c in counts)
+
+
 def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatch):
     """A lattice's Hessian (t_shape at level 3, 2716 DOFs) factorized by PARDISO on
     1, 2 and 3 threads, in its own order or PARDISO's, solves to the same bits; a

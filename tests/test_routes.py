@@ -254,10 +254,12 @@ def test_a_route_moved_across_triangles_gives_what_a_new_robot_gives(monkeypatch
     triangles (the cables' incidences, the sparsity pattern and the capstan
     weights are rebuilt in place): the soft IK's objective, gradient and adjoints
     there are bit for bit those of a new robot of the same cables started from
-    the same equilibria (which start Newton with a fresh factorization)."""
+    the same equilibria (which start Newton with a fresh factorization), where
+    the step makes the pattern anew (no detached segments)."""
     from tendon_taichi.solve.direct import DirectSolver
 
     monkeypatch.setattr(DirectSolver, "chord_across_moves", False)
+    monkeypatch.setattr(DirectSolver, "detached_max", 0)
     p, obj, z0 = _arm_objective()
     obj.evaluate(z0)
     ik, tri0, start = obj.ik, obj.ik.model.cables.points.tri.copy(), [x.copy() for x in obj.positions]
@@ -279,6 +281,7 @@ def test_a_route_moved_back_reuses_its_earlier_pattern(monkeypatch):
     from tendon_taichi.solve.direct import DirectSolver
 
     monkeypatch.setattr(DirectSolver, "chord_across_moves", False)
+    monkeypatch.setattr(DirectSolver, "detached_max", 0)
     p, obj, z0 = _arm_objective()
     obj.evaluate(z0)
     linear = obj.ik.poses[0].linear
@@ -291,6 +294,46 @@ def test_a_route_moved_back_reuses_its_earlier_pattern(monkeypatch):
     obj.evaluate(z0)
     assert linear.pattern is first and linear.ldl is ldl and ldl is not None
     assert _as_a_new_robot(p, obj, z0, start)[0]
+
+
+def test_a_small_route_step_keeps_the_pattern_with_the_moved_segments_detached(monkeypatch):
+    """A step that moves a few waypoints into other triangles keeps the sparsity
+    pattern and its analysis (no new ones): the segments whose entries it lacks
+    are detached (at most ``detached_max``), and the Hessian assembled with them
+    is a new robot's to round-off, its factorization's solves agree to 1e-10, and
+    the step's objective and gradient are those of a new robot of the same cables
+    solved from the same equilibria, to the evaluation's tolerance."""
+    from tendon_taichi.optimizer.soft_ik import SoftIK
+    from tendon_taichi.solve.direct import DirectSolver
+
+    monkeypatch.setattr(DirectSolver, "chord_across_moves", False)
+    p, obj, z0 = _arm_objective()
+    obj.evaluate(z0)
+    linear = obj.ik.poses[0].linear
+    first, ldl = linear.pattern, linear.ldl
+    start = [x.copy() for x in obj.positions]
+    z1 = z0.copy()
+    z1[5] -= 0.001 / p.size  # the third control point 1 mm down
+    obj.evaluate(z1)
+    assert linear.pattern is first and linear.ldl is ldl
+    assert 0 < len(linear.detached) <= DirectSolver.detached_max
+    m = obj.ik.poses[0].model
+    new = DirectSolver(m)
+    assert len(new.detached) == 0 and new.pattern is not first
+    H, H_new = linear.assemble().toarray(), new.assemble().toarray()
+    assert np.abs(H - H_new).max() <= 1e-14 * np.abs(H_new).max()
+    rhs = np.random.default_rng(0).normal(size=(m.n, 2))
+    rhs[p.fixed] = 0.0
+    y, y_new = linear.solve(rhs), new.solve(rhs)
+    assert linear.factor.lu is None and linear.factor.U.shape[1] > len(linear.detached) - 1
+    assert np.abs(y - y_new).max() <= 1e-10 * np.abs(y_new).max()
+    ik = obj.ik
+    fresh = SoftIK(p, p.scene.optimize, "direct", cables=ik.model.cables)
+    for ps, x in zip(fresh.poses, start):
+        ps.model.set_positions(x)
+    f, g = fresh.evaluate(obj.unpack(z1)[1].ravel())
+    assert abs(ik.last_value() - f) <= 1e-8 * abs(f)
+    assert np.abs(ik._last[2] - g).max() <= 1e-6 * np.abs(g).max()
 
 
 def _route_step():

@@ -144,6 +144,7 @@ def _kernel_cache(ti) -> dict:
 
 def _limit_blas() -> None:
     """Cap the BLAS thread pools (``TENDON_TAICHI_BLAS_THREADS``, default 1)."""
+    import scipy.linalg  # noqa: F401 - scipy's own BLAS loaded now, so that the cap reaches it too
     from threadpoolctl import threadpool_limits
 
     n = _env_int("TENDON_TAICHI_BLAS_THREADS")

@@ -14,7 +14,15 @@ stiffness ``kc g g^T`` (``g = dL/dx``, ``L`` its weighted length): a dense
 block per cable. It is kept out of the sparse matrix and applied as a low-rank
 update (Woodbury: one extra solve per taut tendon), so the sparse pattern is
 that of the elements and the segments alone, and its ordering - the
-elements' - is computed once per mesh and shared by every tendon layout."""
+elements' - is computed once per mesh and shared by every tendon layout.
+
+When a route moves (route optimization), a few of its points cross into other
+triangles; a new pattern would need a new analysis of the factorization (at
+level 3 about 2.5 ms against 1 ms for the numbers). Where the current pattern
+lacks the entries of at most :data:`DETACHED_MAX` segments it is kept, and
+those segments are *detached* (:meth:`DirectSolver._reattach`): each one's
+rank-one block is split into a part within its points' triangles, which every
+pattern holds, and one more low-rank column."""
 
 from __future__ import annotations
 
@@ -39,7 +47,8 @@ from .pardiso import available as pardiso_available
 @dataclass
 class Assembled:
     """An assembled Hessian in the fill-reducing order: ``H = Hp + U diag(K) U^T``,
-    ``Hp`` sparse (CSC), ``U`` (nf, r) and ``K`` (r,) > 0 the taut tendons' axial terms."""
+    ``Hp`` sparse (CSC), ``U`` (nf, r) and ``K`` (r,) the taut tendons' axial terms
+    (K > 0), then the detached segments' columns (K < 0, :meth:`DirectSolver._reattach`)."""
 
     Hp: sp.csc_matrix
     U: np.ndarray
@@ -80,7 +89,9 @@ class LDL:
         return bool(np.all(self.solver.factors()[1] > 0.0))
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        """A^-1 b with the current factorization, b (n,)."""
+        """A^-1 b with the current factorization, b (n,) or (n, r)."""
+        if np.ndim(b) == 2:
+            return np.column_stack([self.solver.solve(c) for c in np.asarray(b).T]) if b.shape[1] else b.copy()
         return self.solver.solve(b)
 
 
@@ -104,11 +115,11 @@ class Factorization:
         self.order = order
         self.U = H.U
         if len(H.K):
-            self.AinvU = np.column_stack([self._sparse_solve(u) for u in H.U.T])
+            self.AinvU = self._sparse_solve(H.U).reshape(H.U.shape)
             self.capacitance = np.diag(1.0 / H.K) + H.U.T @ self.AinvU
 
     def _sparse_solve(self, b: np.ndarray) -> np.ndarray:
-        """Hp^-1 b, b (nf,) in the ordered numbering."""
+        """Hp^-1 b, b (nf,) or (nf, r) in the ordered numbering."""
         if self.lu is not None:
             return self.lu.solve(b)
         if self.ldl.generation != self.generation:  # the shared factors moved on: factorize a copy of its own
@@ -145,6 +156,16 @@ PATTERNS_KEPT = 4
 _SHARED_PATTERNS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 PATTERNS_SHARED = 8
 
+#: of a segment block's 144 entries (12 x 12, row-major) those within one of its two points' triangles
+_SAME_HALF = (np.arange(144) // 12 < 6) == (np.arange(144) % 12 < 6)
+
+#: a tendon robot's cables moved: the most segments whose entries its pattern lacks
+#: that it keeps (their blocks in the low-rank part, one more column to solve per
+#: factorization each) rather than make the new pattern and analyze it. On the 36
+#: route optimizations of `design t_shape --resolution 3` replayed: 15.0 ms per
+#: evaluation with 8, 15.4 with 16, 16.4 with 0 (every new pattern made)
+DETACHED_MAX = 8
+
 
 @dataclass
 class _ElementPattern:
@@ -179,6 +200,15 @@ class _Pattern:
     reorder: bool
     ldl: LDL | None = None
 
+    @property
+    def keys(self) -> np.ndarray:
+        """The entries' sorted keys ``col nf + row`` (ordered numbering), (nnz,)."""
+        if "_keys" not in self.__dict__:
+            nf = len(self.indptr) - 1
+            cols = np.repeat(np.arange(nf, dtype=np.int64), np.diff(self.indptr))
+            self.__dict__["_keys"] = cols * nf + self.indices
+        return self.__dict__["_keys"]
+
 
 class DirectSolver(LinearSolver):
     """The model's Hessian assembled as a scipy sparse matrix and factorized
@@ -197,6 +227,11 @@ class DirectSolver(LinearSolver):
     #: it when it stops contracting); False forgets it, so that a robot whose cables
     #: moved solves bit for bit as a new robot of the same cables would
     chord_across_moves = True
+
+    #: the most segments a moved tendon robot's pattern may lack before it is made
+    #: anew (:meth:`_reattach`; 0: always made anew, so that the robot assembles bit
+    #: for bit as a new one of the same cables)
+    detached_max = DETACHED_MAX
 
     def __init__(self, model: Model, ordered: bool = True):
         self.model = model
@@ -219,9 +254,15 @@ class DirectSolver(LinearSolver):
         self.shape = (int(self.free.sum()),) * 2
         key = self._tri.tobytes() + cab.segments.tobytes()
         pattern = _recent(self._patterns, key, lambda: self._shared_pattern(key), PATTERNS_KEPT)
+        self._use(pattern)
+
+    def _use(self, pattern: _Pattern) -> None:
+        """Assemble into ``pattern``, the current segments' own."""
         self.pattern = pattern
         self.order, self.scatter = pattern.order, pattern.scatter
         self.indices, self.indptr, self.nnz = pattern.indices, pattern.indptr, pattern.nnz
+        self._pattern_sdofs = self.sdofs
+        self.detached = np.zeros(0, dtype=np.int64)
 
     def _shared_pattern(self, key: bytes) -> _Pattern:
         """The pattern of the cable structure ``key`` as any solver of this mesh last
@@ -273,10 +314,56 @@ class DirectSolver(LinearSolver):
         (:attr:`chord_across_moves`)."""
         if np.array_equal(self.model.cables.points.tri, self._tri):
             self.seg_coef = _segment_coefficients(self.model.cables)
-        else:
+        elif not self._reattach():
             self._build_structure()
         if not self.chord_across_moves:
             self.reset()
+
+    def _reattach(self) -> bool:
+        """Keep the current pattern after the cables' points moved to other
+        triangles (the same segments, at most :data:`DETACHED_MAX` of them with
+        entries the pattern lacks): each segment whose entries it holds assembles
+        into it; the others are :attr:`detached`. A detached segment's block
+        ``k u u^T`` (``u = ua + ub``, its parts on the start point's triangle and
+        the end point's) is ``2k (ua ua^T + ub ub^T) - k (ua - ub)(ua - ub)^T``: the
+        first part within one triangle each (entries every pattern holds, added twice
+        - what the sparse part gets is the Hessian plus a positive semidefinite
+        term, positive definite where the Hessian is), the second a column of the
+        low-rank part. False (nothing changed) where more segments would be
+        detached, or the pattern is the current segments' own (one of the last
+        few, which :meth:`_build_structure` takes)."""
+        m, cab = self.model, self.model.cables
+        if m.single or not self.ordered or len(self._pattern_sdofs) != len(cab.segments):
+            return False
+        tri = cab.points.tri
+        if (tri.tobytes() + cab.segments.tobytes()) in self._patterns:
+            return False
+        pt_nodes = m.mesh.triangles[tri]
+        seg_nodes = np.concatenate([pt_nodes[cab.segments[:, 0]], pt_nodes[cab.segments[:, 1]]], 1)
+        sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)
+        moved = np.flatnonzero(np.any(sdofs != self._pattern_sdofs, axis=1))
+        nf = self.shape[0]
+        free_index = np.cumsum(self.free) - 1
+        d = sdofs[moved]
+        rs, cs = np.repeat(d, 12, axis=1), np.tile(d, (1, 12))  # (k, 144) each
+        kept = self.free[rs] & self.free[cs]
+        keys = self.order[free_index[cs]].astype(np.int64) * nf + self.order[free_index[rs]]
+        at = np.minimum(np.searchsorted(self.pattern.keys, keys), self.nnz - 1)
+        held = (self.pattern.keys[at] == keys) | ~kept
+        loose = ~held.all(axis=1)
+        if loose.sum() > self.detached_max:
+            return False
+        same = _SAME_HALF[None, :] | ~loose[:, None]  # what each moved segment assembles into the pattern
+        scatter = self.pattern.scatter.copy()
+        base = len(scatter) - 144 * len(sdofs)
+        idx = base + 144 * moved[:, None] + np.arange(144)
+        scatter[idx] = np.where(kept & same, at, self.nnz)
+        twice = kept & same & loose[:, None]
+        self._twice = (idx[twice], at[twice])
+        self._tri = tri.copy()
+        self.sdofs, self.seg_coef, self.scatter = sdofs, _segment_coefficients(cab), scatter
+        self.detached = moved[loose]
+        return True
 
     def _element_pattern(self, free_index: np.ndarray, nf: int, tendons: bool) -> _ElementPattern:
         """The elements' part of the pattern (``free_index``: each DOF's index among
@@ -299,7 +386,8 @@ class DirectSolver(LinearSolver):
 
     def _low_rank(self) -> tuple[np.ndarray, np.ndarray]:
         """The taut many-segment cables' axial terms: U (nf, r) in the ordered
-        numbering, its columns their dL/dx, and K (r,) their kc."""
+        numbering, its columns their dL/dx, and K (r,) their kc; then the detached
+        segments' columns (:meth:`_detached_blocks`)."""
         m = self.model
         nf = self.shape[0]
         if m.single or m.C == 0:
@@ -313,9 +401,34 @@ class DirectSolver(LinearSolver):
         for j, c in enumerate(taut):  # np.bincount adds in order, as np.add.at would
             full[:, j] = np.bincount(self.sdofs[st[c]:st[c + 1]].ravel(), grad[st[c]:st[c + 1]].ravel(),
                                      minlength=2 * m.n)
-        U = np.empty((nf, len(taut)))
+        K = kc[taut]
+        if len(self.detached):
+            block, k = self._detached_blocks(seg_n.reshape(-1, 2), seg_w)
+            full, K = np.column_stack([full, block]), np.concatenate([K, k])
+        U = np.empty((nf, len(K)))
         U[self.order] = full[self.free]
-        return U, kc[taut]
+        return U, K
+
+    def _detached_blocks(self, seg_n: np.ndarray, seg_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The detached segments' low-rank terms ``-k v v^T`` (:meth:`_reattach`),
+        ``v = ua - ub``, from the segment block ``tau w / l (I - n n^T) = k p p^T``
+        (p the unit normal) over its two points' nodes
+        (:func:`~tendon_taichi.physics.forces.k_hessian_entries`): v (2n, d) and
+        ``-k`` (d,); slack and zero-length segments left out."""
+        m = self.model
+        seg_l, tau = m.read_many([("SEG_L", m.S), ("TAU", m.C)])
+        s = self.detached
+        cable = np.searchsorted(m.cables.start, s, side="right") - 1
+        length = seg_l[s]
+        k = tau[cable] * seg_w[s] / np.where(length > 0.0, length, 1.0) * (length > 0.0)
+        s, k = s[k > 0.0], k[k > 0.0]
+        p = np.column_stack([-seg_n[s, 1], seg_n[s, 0]])
+        coef = self.seg_coef[s] * np.repeat([1.0, -1.0], 3)  # ua - ub: the end point's part negated
+        v = (coef[:, :, None] * p[:, None, :]).reshape(-1, 12)
+        full = np.zeros((2 * m.n, len(s)))
+        for j in range(len(s)):
+            full[:, j] = np.bincount(self.sdofs[s[j]], v[j], minlength=2 * m.n)
+        return full, -k
 
     def _values(self) -> np.ndarray:
         """Every sparse Hessian entry in pattern order: element and segment blocks from Taichi."""
@@ -327,7 +440,10 @@ class DirectSolver(LinearSolver):
             self.model.prepare_hessian(project)
         # the entries on fixed DOFs add into one more bin, dropped: a kept entry's sums
         # are those of the kept entries alone, in the same order
-        data = np.bincount(self.scatter, weights=self._values(), minlength=self.nnz + 1)[:self.nnz]
+        values = self._values()
+        data = np.bincount(self.scatter, weights=values, minlength=self.nnz + 1)[:self.nnz]
+        if len(self.detached):  # their blocks' parts within one triangle, once more (:meth:`_reattach`)
+            data += np.bincount(self._twice[1], weights=values[self._twice[0]], minlength=self.nnz)
         U, K = self._low_rank()
         return Assembled(sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape), U, K)
 

@@ -171,12 +171,15 @@ class PardisoLDL:
         return self._args
 
     def _call(self, phase: int, b: np.ndarray | None = None) -> tuple[int, np.ndarray | None]:
+        """One PARDISO phase; ``b`` (n,) or (n, r) in Fortran order: r right-hand sides at once."""
         before, between, absent = self._fixed_args()
+        if b is not None and b.ndim == 2:
+            between = between[:5] + (ctypes.byref(ctypes.c_int32(b.shape[1])),) + between[6:]
         pardiso = _load()
         # every phase on the analysis's threads (on others PARDISO crashes), set for the
         # calling thread: that wins over the process's MKL threads, which threadpoolctl caps
         _lib["set_threads"](self.threads)
-        x = None if b is None else np.empty_like(b)
+        x = None if b is None else np.empty_like(b, order="F")
         err = ctypes.c_int32(0)
         pardiso(*before, ctypes.byref(ctypes.c_int32(phase)), *between,
                 absent if b is None else ctypes.c_void_p(b.ctypes.data),
@@ -209,8 +212,9 @@ class PardisoLDL:
         return err == 0
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        """A^-1 b with the current factorization, b (n,)."""
-        err, x = self._call(33, np.ascontiguousarray(b, dtype=np.float64))
+        """A^-1 b with the current factorization, b (n,), or (n, r): r columns in one call."""
+        b = np.asfortranarray(b, dtype=np.float64) if np.ndim(b) == 2 else np.ascontiguousarray(b, dtype=np.float64)
+        err, x = self._call(33, b)
         if err:
             raise np.linalg.LinAlgError(f"PARDISO solve failed (error {err})")
         return x
