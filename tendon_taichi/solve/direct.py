@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Iterable, Iterator
 
 import numpy as np
@@ -36,6 +37,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import ConvergenceError
+from ..physics.capstan import perp
 from ..physics.model import Model
 from ._csc import triangle
 from ._newton_kernels import direction_from
@@ -200,14 +202,11 @@ class _Pattern:
     reorder: bool
     ldl: LDL | None = None
 
-    @property
+    @cached_property
     def keys(self) -> np.ndarray:
         """The entries' sorted keys ``col nf + row`` (ordered numbering), (nnz,)."""
-        if "_keys" not in self.__dict__:
-            nf = len(self.indptr) - 1
-            cols = np.repeat(np.arange(nf, dtype=np.int64), np.diff(self.indptr))
-            self.__dict__["_keys"] = cols * nf + self.indices
-        return self.__dict__["_keys"]
+        nf = len(self.indptr) - 1
+        return np.repeat(np.arange(nf, dtype=np.int64), np.diff(self.indptr)) * nf + self.indices
 
 
 class DirectSolver(LinearSolver):
@@ -247,10 +246,8 @@ class DirectSolver(LinearSolver):
         m = self.model
         cab = m.cables
         self._tri = cab.points.tri.copy()
-        pt_nodes = m.mesh.triangles[cab.points.tri] if m.P else np.zeros((0, 3), np.int64)
-        seg_nodes = np.concatenate([pt_nodes[cab.segments[:, 0]], pt_nodes[cab.segments[:, 1]]], 1)
         self.seg_coef = _segment_coefficients(cab)
-        self.sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)  # (S, 12)
+        self.sdofs = _segment_dofs(m)
         self.shape = (int(self.free.sum()),) * 2
         key = self._tri.tobytes() + cab.segments.tobytes()
         pattern = _recent(self._patterns, key, lambda: self._shared_pattern(key), PATTERNS_KEPT)
@@ -338,9 +335,7 @@ class DirectSolver(LinearSolver):
         tri = cab.points.tri
         if (tri.tobytes() + cab.segments.tobytes()) in self._patterns:
             return False
-        pt_nodes = m.mesh.triangles[tri]
-        seg_nodes = np.concatenate([pt_nodes[cab.segments[:, 0]], pt_nodes[cab.segments[:, 1]]], 1)
-        sdofs = (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)
+        sdofs = _segment_dofs(m)
         moved = np.flatnonzero(np.any(sdofs != self._pattern_sdofs, axis=1))
         nf = self.shape[0]
         free_index = np.cumsum(self.free) - 1
@@ -422,7 +417,7 @@ class DirectSolver(LinearSolver):
         length = seg_l[s]
         k = tau[cable] * seg_w[s] / np.where(length > 0.0, length, 1.0) * (length > 0.0)
         s, k = s[k > 0.0], k[k > 0.0]
-        p = np.column_stack([-seg_n[s, 1], seg_n[s, 0]])
+        p = perp(seg_n[s])
         coef = self.seg_coef[s] * np.repeat([1.0, -1.0], 3)  # ua - ub: the end point's part negated
         v = (coef[:, :, None] * p[:, None, :]).reshape(-1, 12)
         full = np.zeros((2 * m.n, len(s)))
@@ -590,6 +585,14 @@ def _fill_reducing_order(rows: np.ndarray, cols: np.ndarray, n: int) -> np.ndarr
     lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                    options={"SymmetricMode": True})
     return np.asarray(lu.perm_c, dtype=np.int64)
+
+
+def _segment_dofs(m: Model) -> np.ndarray:
+    """(S, 12): each segment's DOFs, those of its start point's triangle then its end point's."""
+    cab = m.cables
+    pt_nodes = m.mesh.triangles[cab.points.tri] if m.P else np.zeros((0, 3), np.int64)
+    seg_nodes = np.concatenate([pt_nodes[cab.segments[:, 0]], pt_nodes[cab.segments[:, 1]]], 1)
+    return (2 * seg_nodes[:, :, None] + np.arange(2)).reshape(-1, 12)
 
 
 def _segment_coefficients(cab) -> np.ndarray:
