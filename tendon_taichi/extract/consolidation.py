@@ -354,24 +354,28 @@ class _Search:
                 now, flipped = lay, flipped + [i]
         return now, flipped
 
-    def finish(self, now: Layout, rounds: int | None = None) -> tuple[Layout, list[Step]]:
+    def finish(self, now: Layout, rounds: int | None = None,
+               iterations: int | None = None) -> tuple[Layout, list[Step]]:
         """The layout oriented and its routes optimized (at most ``rounds``, default
-        ``refine``, rounds), and the steps that took."""
+        ``refine``, rounds of at most ``iterations``, default the route settings', SLSQP
+        iterations), and the steps that took."""
         steps = []
         now, flipped = self.orient(now)
         if flipped:
             steps.append(Step("orient", tuple(flipped), now.count, now.error))
-        done = self.optimize(now, rounds)
+        done = self.optimize(now, rounds, iterations)
         if done is not now:
             steps.append(Step("route", tuple(range(done.count)), done.count, done.error))
         return replace(done, optimized=True), steps
 
-    def optimize(self, now: Layout, rounds: int | None = None) -> Layout:
+    def optimize(self, now: Layout, rounds: int | None = None, iterations: int | None = None) -> Layout:
         """The layout's routes and contractions optimized together, at most
-        ``rounds`` (default ``refine``) rounds, while a round lowers the cost; each
-        round starts from the routes resampled for their length and made to keep
-        the clearance."""
+        ``rounds`` (default ``refine``) rounds of at most ``iterations`` (default the
+        route settings') SLSQP iterations, while a round lowers the cost; each round
+        starts from the routes resampled for their length and made to keep the
+        clearance."""
         rounds = self.options.refine if rounds is None else min(rounds, self.options.refine)
+        rs = self.rs if iterations is None else replace(self.rs, iterations=iterations)
         for k in range(rounds if now.routes else 0):
             size = self.problem.size
             routes = [Route(r.control, sample_count(r.length, size), r.tension, r.tension_std, r.source)
@@ -381,7 +385,7 @@ class _Search:
             self.log(f"{self.source}: optimizing {len(routes)} route(s), round {k + 1}")
             t0 = time.perf_counter()
             res = optimize_routes(self.problem, routes, np.atleast_2d(real.ratios).reshape(self.problem.n_poses, -1),
-                                  self.settings, self.rs, self.solver, positions(real))
+                                  self.settings, rs, self.solver, positions(real))
             self.out.route_evaluations += res.evaluations
             self.out.route_s += time.perf_counter() - t0
             cleared = [keep_clear(r, self.problem.walls, self.rs.clearance) for r in res.routes]

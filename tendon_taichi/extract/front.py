@@ -37,11 +37,16 @@ tendons together:
   error is lower;
 * **extension** (:func:`_extend`): up to one count above the first within the
   budget, each count's layout with one route end carried on straight by
-  ``EXTEND`` x L (each end of each route in turn), solved and finished, replaces
-  it when that costs less. An extractor's strand ends where the optimized fibers
-  thin out, often short of where the tendon does most, and route optimization
-  moves an end only downhill: carried on, a route can reach a better optimum it
-  cannot walk to (snake_planted_1t_s1 at level 3: one tendon 0.22 -> 0.07 % of L);
+  ``EXTEND`` x L (each end of each route in turn), solved and screened by one
+  short round of route optimization (``EXTEND_SCREEN`` SLSQP iterations); the
+  best screened is finished and replaces the layout when that costs less. An
+  extractor's strand ends where the optimized fibers thin out, often short of
+  where the tendon does most, and route optimization moves an end only
+  downhill: carried on, a route can reach a better optimum it cannot walk to
+  (snake_planted_1t_s1 at level 3: one tendon 0.22 -> 0.07 % of L). Before a
+  route optimization has adapted the rest of a route to its new end, an
+  extension mostly costs more than the layout; after a short one, the order of
+  the extensions is that of their finished costs;
 * **descent** (:func:`_descend`): from the most tendons down, each count's
   finished layout is reduced by every drop and smooth join (screened, the best
   solved in full); where the least costly reduction, as it is, already costs
@@ -112,6 +117,9 @@ SAME_ROUTE = 0.02
 SLACK = 1e-6
 #: the extension tries each route end carried on straight by this much (x L, :func:`_extensions`)
 EXTEND = 0.1
+#: SLSQP iterations of the one round of route optimization that screens each extension
+#: (:func:`_screened`); only the best screened extension of a layout is finished
+EXTEND_SCREEN = 15
 
 
 @dataclass(frozen=True)
@@ -489,12 +497,11 @@ def _repair(search: _Search, front: Front, pool: list[Route], size: float, chang
             front.offer([front.layouts[k + 1]], size)
 
 
-def _extension_jobs(search: _Search, layout: Layout, size: float, rounds: int) -> list[tuple]:
-    """The jobs of :func:`_extended` for the solved ``layout``: its routes with one
+def _extension_jobs(search: _Search, layout: Layout, size: float) -> list[tuple]:
+    """The jobs of :func:`_screened` for the solved ``layout``: its routes with one
     route end carried on straight by ``EXTEND`` x L (:func:`~.routes.extend_route`;
     each end of each route, kept clear of the walls; an end the walls cut back to
-    less than half that is left out), each to be solved from ``layout``'s
-    contractions and equilibria and finished (``rounds``)."""
+    less than half that is left out)."""
     jobs = []
     for i, route in enumerate(layout.routes):
         for end in (0, 1):
@@ -502,38 +509,59 @@ def _extension_jobs(search: _Search, layout: Layout, size: float, rounds: int) -
                                 search.rs.clearance)
             if longer is None or longer.length < route.length + 0.5 * EXTEND * size:
                 continue
-            jobs.append((layout, layout.routes[:i] + [longer] + layout.routes[i + 1:], rounds))
+            jobs.append((layout, layout.routes[:i] + [longer] + layout.routes[i + 1:]))
     return jobs
 
 
-def _extensions(search: _Search, layouts: list[Layout], size: float, rounds: int) -> list[list[Layout]]:
-    """Per layout of ``layouts``, its extensions (:func:`_extension_jobs`) solved and
-    finished - all of them in one batch, on the search's workers too; those that
-    cannot be solved are left out."""
-    jobs = [_extension_jobs(search, lay, size, rounds) for lay in layouts]
-    found = iter(search.each(partial(_extended, search), _extension_task, [job for js in jobs for job in js]))
-    return [[lay for lay in [next(found) for _ in js] if lay is not None] for js in jobs]
+def _extensions(search: _Search, layouts: list[Layout], size: float, rounds: int) -> list[Layout | None]:
+    """Per layout of ``layouts``, the best of its extensions (:func:`_extension_jobs`):
+    each solved and screened (:func:`_screened`), the least costly screened one
+    finished (:func:`_continued`, ``rounds``); None where none can be solved. The
+    screens run in one batch, then the finishes in another, on the search's workers
+    too."""
+    jobs = [_extension_jobs(search, lay, size) for lay in layouts]
+    found = iter(search.each(partial(_screened, search), _screen_task, [job for js in jobs for job in js]))
+    best = [min([lay for lay in [next(found) for _ in js] if lay is not None], key=lambda lay: lay.cost, default=None)
+            for js in jobs]
+    done = iter(search.each(partial(_continued, search), _continue_task, [(lay, rounds) for lay in best if lay]))
+    return [next(done) if lay else None for lay in best]
 
 
-def _extended(search: _Search, layout: Layout, routes: list[Route], rounds: int) -> Layout | None:
+def _screened(search: _Search, layout: Layout, routes: list[Route]) -> Layout | None:
     """``routes`` (``layout``'s with one extended) solved from ``layout``'s
-    contractions and equilibria and finished; None when they cannot be solved."""
+    contractions and equilibria, oriented, and their routes optimized one round of at
+    most ``EXTEND_SCREEN`` SLSQP iterations; None when they cannot be solved."""
     start = np.atleast_2d(layout.realizable.ratios).reshape(search.problem.n_poses, -1)
     lay = search.solve(routes, start, layout)
-    return None if lay is None else _finished(search, replace(lay, source=sources(routes)), rounds)
+    if lay is None:
+        return None
+    done = search.finish(lay, rounds=1, iterations=EXTEND_SCREEN)[0]
+    return replace(done, source=sources(routes), optimized=False)
 
 
-def _extension_task(spec: tuple, job: tuple[Layout, list[Route], int]) -> tuple[Layout | None, dict]:
-    """:func:`_extended` as a worker runs it."""
+def _screen_task(spec: tuple, job: tuple[Layout, list[Route]]) -> tuple[Layout | None, dict]:
+    """:func:`_screened` as a worker runs it."""
     search = _Search.again(spec, job[0])
-    return _extended(search, *job), search.tally()
+    return _screened(search, *job), search.tally()
+
+
+def _continued(search: _Search, layout: Layout, rounds: int) -> Layout:
+    """A screened ``layout`` (:func:`_screened`) finished: its routes optimized on,
+    at most ``rounds`` rounds."""
+    return replace(search.optimize(layout, rounds), source=layout.source, optimized=True)
+
+
+def _continue_task(spec: tuple, job: tuple[Layout, int]) -> tuple[Layout, dict]:
+    """:func:`_continued` as a worker runs it."""
+    search = _Search.again(spec, job[0])
+    return _continued(search, *job), search.tally()
 
 
 def _extend(search: _Search, front: Front, pool: list[Route], size: float, options: ConsolidationSettings,
             say: Callable[[str], None]) -> None:
     """The front's extension (module docstring), in place: up to one count above the
-    first within the budget (where none is, the most tendons only), the best of
-    each count's layout and its extensions (:func:`_extensions`, each offered to
+    first within the budget (where none is, the most tendons only), the better of
+    each count's layout and its best extension (:func:`_extensions`, offered to
     the finer mesh); then the monotone repair (:func:`_repair`) above each count
     whose layout an extension replaced."""
     within = [k for k, lay in front.layouts.items() if lay.error <= options.budget]
@@ -542,11 +570,12 @@ def _extend(search: _Search, front: Front, pool: list[Route], size: float, optio
     for k in counts:
         say(f"front: the {k}-tendon layout with each route end carried on by {EXTEND:g} L")
     extended = _extensions(search, [front.layouts[k] for k in counts], size, options.refine)
-    for k, found in zip(counts, extended):
+    for k, best in zip(counts, extended):
         held = front.layouts[k]
-        front.offer(found, size)
-        best = min(found, key=lambda lay: lay.cost, default=None)
-        if best is not None and best.cost < held.cost:
+        if best is None:
+            continue
+        front.offer([best], size)
+        if best.cost < held.cost:
             say(f"front: a longer route makes the {k}-tendon layout {100 * best.error:.2f}% of L "
                 f"(was {100 * held.error:.2f}%)")
             front.layouts[k] = best
