@@ -31,7 +31,7 @@ def test_every_script_has_a_test():
               "planted/counts_by_level.py", "sweeps/dask_overhead.py", "bench/make_bench.py",
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
-              "secant_replay.py", "route_replay.py"}
+              "secant_replay.py", "route_replay.py", "extension_screen.py"}
     assert scripts == tested
 
 
@@ -72,6 +72,19 @@ def test_route_replay_runs_every_route_optimization_both_ways():
     assert all(int(ln.split(", ")[1].split()[0]) > 0 for ln in out[1:3])  # evaluations
     # the same optimizations from the same starts, the Hessians equal to round-off
     assert out[3].startswith("summed objectives agree to:") and float(out[3].split()[4]) <= 1e-3
+
+
+def test_extension_screen_finishes_every_extension_in_full_too():
+    out = run(BENCH / "extension_screen.py", "t_shape", 1, "--stage-iterations", 25, "--k-min", 0.1,
+              "--extractors", "strands", "--refine", 1, "--beam", 1, "--no-converge").stdout.splitlines()[-5:]
+    assert out[0].startswith("extensions:")
+    tried, layouts = int(out[0].split()[1]), int(out[0].split()[3])
+    assert tried >= layouts > 0
+    assert out[1].startswith("solve's best finishes least:") and int(out[1].split()[4]) <= layouts
+    assert out[2].startswith("screen's best finishes least:") and int(out[2].split()[4]) <= layouts
+    assert out[3].startswith("front's finish / least full finish:")
+    screens, ours, full = (int(part.split()[-1]) for part in out[4].split(": ", 1)[1].split(", "))
+    assert out[4].startswith("route evaluations:") and 0 < screens and 0 < ours and 0 < full
 
 
 def test_simulate_levels_prints_each_level_and_solver():

@@ -46,7 +46,8 @@ tendons together:
   (snake_planted_1t_s1 at level 3: one tendon 0.22 -> 0.07 % of L). Before a
   route optimization has adapted the rest of a route to its new end, an
   extension mostly costs more than the layout; after a short one, the order of
-  the extensions is that of their finished costs;
+  the extensions is mostly that of their finished costs
+  (``benchmarks/extension_screen.py``);
 * **descent** (:func:`_descend`): from the most tendons down, each count's
   finished layout is reduced by every drop and smooth join (screened, the best
   solved in full); where the least costly reduction, as it is, already costs
@@ -523,8 +524,9 @@ def _extensions(search: _Search, layouts: list[Layout], size: float, rounds: int
     found = iter(search.each(partial(_screened, search), _screen_task, [job for js in jobs for job in js]))
     best = [min([lay for lay in [next(found) for _ in js] if lay is not None], key=lambda lay: lay.cost, default=None)
             for js in jobs]
-    done = iter(search.each(partial(_continued, search), _continue_task, [(lay, rounds) for lay in best if lay]))
-    return [next(done) if lay else None for lay in best]
+    todo = [(lay, rounds) for lay in best if lay is not None]
+    done = iter(search.each(partial(_continued, search), _continue_task, todo))
+    return [None if lay is None else next(done) for lay in best]
 
 
 def _screened(search: _Search, layout: Layout, routes: list[Route]) -> Layout | None:
