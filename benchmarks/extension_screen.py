@@ -27,6 +27,8 @@ import numpy as np
 from tendon_taichi.cli import main
 from tendon_taichi.extract import front
 
+from _scene_args import scene_args
+
 #: per layout tried (the held layout's id): [(solved cost, screened cost, full finish cost)]
 SCREENS: dict[int, list[tuple[float, float, float]]] = {}
 #: per layout tried, in order: the cost of the screened best finished by the front
@@ -76,9 +78,7 @@ def report() -> None:
 
 
 def run(argv: list[str]) -> int:
-    scene = argv[0]
-    level = argv[1] if len(argv) > 1 and not argv[1].startswith("-") else "1"
-    flags = argv[2:] if len(argv) > 1 and not argv[1].startswith("-") else argv[1:]
+    scene, level, flags, _ = scene_args(argv)
     front._screened, front._continued = _screened, _continued
     try:
         with tempfile.TemporaryDirectory() as tmp:

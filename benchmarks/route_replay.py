@@ -27,6 +27,8 @@ from tendon_taichi.extract import consolidation, routing
 from tendon_taichi.physics import runtime
 from tendon_taichi.solve import direct
 
+from _scene_args import scene_args
+
 #: the modules that call optimize_routes by their own name for it
 CALLERS = (routing, consolidation)
 
@@ -83,14 +85,7 @@ def replay(calls: list[tuple], detached_max: int) -> tuple[float, int, float]:
 
 
 def run(argv: list[str]) -> None:
-    repeat = 2
-    if "--repeat" in argv:
-        i = argv.index("--repeat")
-        repeat = int(argv[i + 1])
-        del argv[i:i + 2]
-    scene = argv[0]
-    level = argv[1] if len(argv) > 1 and not argv[1].startswith("-") else "1"
-    flags = argv[2:] if len(argv) > 1 and not argv[1].startswith("-") else argv[1:]
+    scene, level, flags, repeat = scene_args(argv, repeat=2)
     calls = record([scene, "--resolution", level, *flags])
     settings = {"every pattern made anew": 0, "detached segments": direct.DETACHED_MAX}
     runs = {label: [] for label in settings}

@@ -28,6 +28,8 @@ from tendon_taichi.errors import ConvergenceError
 from tendon_taichi.extract import consolidation
 from tendon_taichi.extract.routing import RouteObjective, optimize_routes
 
+from _scene_args import scene_args
+
 #: the penalty's weight and L-BFGS-B's iterations before
 PENALTY = 1.0e2
 ITERATIONS = 60
@@ -90,9 +92,7 @@ def report() -> None:
 
 
 def run(argv: list[str]) -> int:
-    scene = argv[0]
-    level = argv[1] if len(argv) > 1 and not argv[1].startswith("-") else "1"
-    flags = argv[2:] if len(argv) > 1 and not argv[1].startswith("-") else argv[1:]
+    scene, level, flags, _ = scene_args(argv)
     consolidation.optimize_routes = _both
     try:
         with tempfile.TemporaryDirectory() as tmp:

@@ -25,6 +25,8 @@ import numpy as np
 from tendon_taichi.cli import main
 from tendon_taichi.optimizer import soft_ik
 
+from _scene_args import scene_args
+
 CALLS = ("configure", "restart", "warm_start", "settle", "evaluate")
 
 
@@ -78,14 +80,7 @@ def replay(made: tuple, calls: list, secant: bool) -> tuple[float, int, int, np.
 
 
 def run(argv: list[str]) -> None:
-    repeat = 2
-    if "--repeat" in argv:
-        i = argv.index("--repeat")
-        repeat = int(argv[i + 1])
-        del argv[i:i + 2]
-    scene = argv[0]
-    level = argv[1] if len(argv) > 1 and not argv[1].startswith("-") else "1"
-    flags = argv[2:] if len(argv) > 1 and not argv[1].startswith("-") else argv[1:]
+    scene, level, flags, repeat = scene_args(argv, repeat=2)
     made, calls = record([scene, "--resolution", level, *flags])
     runs = {False: [], True: []}
     for _ in range(repeat):

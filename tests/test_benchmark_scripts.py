@@ -31,8 +31,25 @@ def test_every_script_has_a_test():
               "planted/counts_by_level.py", "sweeps/dask_overhead.py", "bench/make_bench.py",
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
-              "secant_replay.py", "route_replay.py", "extension_screen.py"}
+              "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py"}
     assert scripts == tested
+
+
+def test_scene_args_splits_scene_level_flags_and_repeat():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("_scene_args", BENCH / "_scene_args.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    scene_args = module.scene_args
+    assert scene_args(["t_shape"]) == ("t_shape", "1", [], None)
+    assert scene_args(["t_shape", "3", "--refine", "1"]) == ("t_shape", "3", ["--refine", "1"], None)
+    assert scene_args(["t_shape", "--beam", "1"]) == ("t_shape", "1", ["--beam", "1"], None)
+    argv = ["t_shape", "2", "--repeat", "5", "--beam", "1"]
+    assert scene_args(argv, repeat=2) == ("t_shape", "2", ["--beam", "1"], 5)
+    assert argv == ["t_shape", "2", "--repeat", "5", "--beam", "1"]  # the caller's list untouched
+    assert scene_args(["t_shape", "--beam", "1"], repeat=2) == ("t_shape", "1", ["--beam", "1"], 2)
+    assert scene_args(["t_shape", "--repeat", "5"]) == ("t_shape", "1", ["--repeat", "5"], None)
 
 
 def test_realizable_side_by_side_solves_each_robot_both_ways():
