@@ -31,7 +31,8 @@ def test_every_script_has_a_test():
               "planted/counts_by_level.py", "sweeps/dask_overhead.py", "bench/make_bench.py",
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
-              "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py"}
+              "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py",
+              "warm_newton.py"}
     assert scripts == tested
 
 
@@ -102,6 +103,21 @@ def test_extension_screen_finishes_every_extension_in_full_too():
     assert out[3].startswith("front's finish / least full finish:")
     screens, ours, full = (int(part.split()[-1]) for part in out[4].split(": ", 1)[1].split(", "))
     assert out[4].startswith("route evaluations:") and 0 < screens and 0 < ours and 0 < full
+
+
+def test_warm_newton_traces_both_warm_solves_per_level():
+    out = run(BENCH / "warm_newton.py", "t_shape", "--levels", 1, 2, "--repeat", 1).stdout.splitlines()
+    assert out[0].split()[:2] == ["level", "DOFs"] and out[-1].startswith("exponents: bench")
+    for level, line in zip((1, 2), out[1:3]):
+        cols = line.split()
+        assert int(cols[0]) == level and int(cols[2]) >= int(cols[3]) >= 0
+        steps, residuals = int(cols[5]), [float(v) for v in cols[12:]]
+        assert len(residuals) == steps + 1 and residuals[-1] <= 1e-10 < residuals[0]
+        assert all(b < a for a, b in zip(residuals, residuals[1:]))
+        # to 1e-8: the residual before the steps the looser solve took was above it, after them below
+        loose = int(cols[7])
+        assert 1 <= loose <= steps and residuals[loose - 1] > 1e-8 >= residuals[loose]
+        assert int(cols[9]) >= 1 and int(cols[10]) >= 0  # the optimizer's chord steps, factorizations
 
 
 def test_simulate_levels_prints_each_level_and_solver():
