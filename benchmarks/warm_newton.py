@@ -123,7 +123,8 @@ def main(argv=None) -> int:
               f"{r['chord_steps']:>9} {r['factorizations']:>6} {1e3 * r['optimizer_s']:>6.1f}  "
               + " ".join(f"{v:.1e}" for v in r["residuals"]), flush=True)
     if len(rows) >= 2:
-        print("exponents: " + ", ".join(f"{k} {slope(rows, k + '_s'):.2f}" for k in ("bench", "loose", "optimizer")))
+        names = {"bench": "bench", "loose": "1e-8", "optimizer": "optimizer"}  # as the columns are headed
+        print("exponents: " + ", ".join(f"{name} {slope(rows, k + '_s'):.2f}" for k, name in names.items()))
     return 0
 
 
