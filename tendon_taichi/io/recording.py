@@ -102,8 +102,9 @@ def geometry_due(i: int, log_every: int) -> bool:
 
 class Recorder:
     """Writes a run to ``path`` as it goes; each completed stage is flushed to disk.
-    Scalars are logged at every iteration, the geometry where :func:`geometry_due`
-    says (``log_every``; 0: log-spaced) and at every stage's end."""
+    Scalars are recorded at every iteration (held, and sent as columns with the
+    stage), the geometry where :func:`geometry_due` says (``log_every``; 0:
+    log-spaced) and at every stage's end."""
 
     def __init__(self, path: str | Path, problem: Problem, settings: OptimizeSettings,
                  meta: dict, log_every: int = 0):
@@ -114,6 +115,8 @@ class Recorder:
         self.problem, self.settings = problem, settings
         self.log_every = max(0, int(log_every))
         self.edges = mesh_edges(problem.mesh.triangles)
+        #: per-iteration scalars not yet sent: entity -> [(stage, iteration, value)]
+        self._scalars: dict[str, list[tuple[int, int, float]]] = {}
         self.rec = rr.RecordingStream(APP_ID, recording_id=meta.get("run_id"), batcher_config=batcher())
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec.save(str(self.path), default_blueprint=default_blueprint())
@@ -148,16 +151,16 @@ class Recorder:
         """Log one L-BFGS-B iteration (``step`` counts over the whole run, ``local``
         within its stage, from 1) with the per-pose positions ``xs`` (P, n, 2) and
         tensions ``taus`` (P, C); ``force`` logs the geometry whatever ``local``."""
-        rr, rec = self.rr, self.rec
-        rec.set_time("stage", sequence=stage)
-        rec.set_time("iteration", sequence=step)
-        for name, value in figures.objective.items():
-            rec.log(f"/metrics/objective/{name}", rr.Scalars(float(value)))
-        rec.log("/metrics/figures/pose_error_rel", rr.Scalars(float(figures.pose_error_rel)))
-        rec.log("/metrics/figures/active_fibers", rr.Scalars(float(figures.active_fibers)))
-        rec.log("/metrics/figures/k", rr.Scalars(float(k) if k is not None else float("nan")))
+        scalars = {**{f"/metrics/objective/{name}": value for name, value in figures.objective.items()},
+                   "/metrics/figures/pose_error_rel": figures.pose_error_rel,
+                   "/metrics/figures/active_fibers": figures.active_fibers,
+                   "/metrics/figures/k": k if k is not None else float("nan")}
+        for entity, value in scalars.items():
+            self._scalars.setdefault(entity, []).append((stage, step, float(value)))
         if not force and not geometry_due(local, self.log_every):
             return
+        self.rec.set_time("stage", sequence=stage)
+        self.rec.set_time("iteration", sequence=step)
         names = self.problem.pose_names
         for i, (x, tau) in enumerate(zip(xs, taus)):
             self._body(f"/world/poses/{names[i]}" if len(names) > 1 else "/world", self.problem.pose(i), x, tau)
@@ -175,9 +178,21 @@ class Recorder:
         rec.log(f"{base}/targets", rr.Points2D(p.target_positions(x), colors=[(40, 120, 255)], radii=-4.0))
         rec.log(f"{base}/goals", rr.Points2D(p.target_goal, colors=[(40, 200, 80)], radii=-4.0))
 
+    def _send_scalars(self) -> None:
+        """Send the scalars held since the last call, a column per entity (one
+        ``rr.log`` per value would cost more than the iteration it records)."""
+        rr = self.rr
+        for entity, rows in self._scalars.items():
+            stage, step, value = zip(*rows)
+            self.rec.send_columns(entity, indexes=[rr.TimeColumn("stage", sequence=stage),
+                                                   rr.TimeColumn("iteration", sequence=step)],
+                                  columns=rr.Scalars.columns(scalars=np.array(value)))
+        self._scalars = {}
+
     def stage(self, result, step: int) -> None:
         """Log a completed stage losslessly and flush it to disk."""
         rr, rec = self.rr, self.rec
+        self._send_scalars()
         rec.set_time("stage", sequence=result.stage)
         rec.set_time("iteration", sequence=step)
         rec.log("/stages/r", rr.Tensor(np.asarray(result.r, dtype=np.float64)))
@@ -193,6 +208,7 @@ class Recorder:
         self.rec.log(entity, archetype, static=static)
 
     def close(self) -> None:
+        self._send_scalars()
         self.rec.flush()
         self.rec.disconnect()
 
