@@ -98,3 +98,15 @@ def test_host_views_move_the_numbers_the_copy_kernels_do():
     assert np.array_equal(views.last_gradient, kernels.last_gradient)
     views.read("X", 4)[:] = 0.0  # a read is a copy, never the buffer itself
     assert np.array_equal(views.positions(), kernels.positions())
+
+
+def test_a_kernel_that_does_not_compile_names_its_file_line_and_code():
+    """Taichi's source positions, described plainly (runtime._plain_source_positions),
+    still point at the offending line."""
+    def broken(n: ti.i32) -> ti.i32:
+        return n + not_defined  # noqa: F821
+
+    with pytest.raises(Exception) as err:
+        ti.kernel(broken)(1)
+    text = str(err.value)
+    assert "test_launch.py" in text and "return n + not_defined" in text and "line" in text
