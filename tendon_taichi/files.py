@@ -30,10 +30,11 @@ except ImportError:  # Windows: no advisory locks; writes stay atomic
     fcntl = None
 
 
-def check_writable(path: str | Path, what: str = "output") -> None:
+def check_writable(path: str | Path, what: str = "output", make: bool = True) -> None:
     """Raise InputError, before any work, when a file cannot be written at ``path``
     (its folder cannot be made or written, or it is a folder; a stream, when it is
-    not writable); leaves nothing behind but the folders it made."""
+    not writable); leaves nothing behind but the folders it made - none, without
+    ``make``: then the nearest folder that exists is tried instead."""
     path = destination(path)
     if path.is_dir():
         raise InputError(f"the {what} '{path}' is a folder")
@@ -41,12 +42,27 @@ def check_writable(path: str | Path, what: str = "output") -> None:
         if not os.access(path, os.W_OK):
             raise InputError(f"cannot write the {what} '{path}': permission denied")
         return
-    above = next((f for f in path.parents if f.exists()), None)
+    _check_folder_below(path.parent, path, what, make)
+
+
+def check_folder(path: str | Path, what: str = "output folder") -> None:
+    """Raise InputError, before any work, when files cannot be written into the
+    folder ``path`` (it is a file, or neither it nor the folder that would hold it
+    can be written); makes nothing."""
+    path = Path(path)
+    _check_folder_below(path, path, what, make=False)
+
+
+def _check_folder_below(folder: Path, path: Path, what: str, make: bool) -> None:
+    """Whether a file can be written in ``folder`` (made with ``make``, else its
+    nearest existing folder is tried); ``path`` and ``what`` name it in the error."""
+    above = next((f for f in (folder, *folder.parents) if f.exists()), None)
     if above is not None and not above.is_dir():
         raise InputError(f"cannot write the {what} '{path}': '{above}' is a file, not a folder")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=path.parent):
+        if make:
+            folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder if make else above):
             pass
     except OSError as exc:
         raise InputError(f"cannot write the {what} '{path}': {exc.strerror or exc}") from None

@@ -119,6 +119,33 @@ def test_bad_command_lines(cli, tmp_path, args, message):
     assert not (tmp_path / "recordings").exists()
 
 
+@pytest.mark.parametrize("args,message", [
+    (["scenes", "--json", "{file}/x.json"], "cannot write the --json file"),
+    (["simulate", "t_shape", "--uniform", 0.05, "--export", "{folder}"], "the export '{folder}' is a folder"),
+    (["simulate", "t_shape", "--uniform", 0.05, "--vtu", "{folder}"], "the VTU file '{folder}' is a folder"),
+    (["optimize", "t_shape", "--png", "{file}/sub/x.png"], "'{file}' is a file, not a folder"),
+    (["extract", "{file}", "--extractor", "strands", "--svg", "{folder}"], "the drawing '{folder}' is a folder"),
+    (["bench", "t_shape", "--levels", 1, "--out", "{file}"], "'{file}' is a file, not a folder"),
+    (["design", "t_shape", "--out", "{file}/d"], "'{file}' is a file, not a folder"),
+])
+def test_an_output_that_cannot_be_written_is_refused_before_any_work(cli, tmp_path, args, message):
+    """Every flag that names an output (a file, or --out's folder) is tried first:
+    one line, exit 2, and nothing computed or written (no recording, no folders)."""
+    (tmp_path / "file").write_text("x")
+    (tmp_path / "folder").mkdir()
+    names = {"file": tmp_path / "file", "folder": tmp_path / "folder"}
+    r = cli(*[str(a).format(**names) for a in args], cwd=tmp_path)
+    _assert_one_line_error(r, message.format(**names))
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["file", "folder"]
+
+
+@pytest.mark.parametrize("args", [["design", "t_shape", "--extractors", "strands", "bogus"],
+                                  ["planted-bench", "--extractors", "bogus"]])
+def test_an_unknown_extractor_is_refused_before_any_work(cli, tmp_path, args):
+    _assert_one_line_error(cli(*args, cwd=tmp_path), "unknown extractor 'bogus' (installed: ")
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("name", ["TENDON_TAICHI_FACTOR_THREADS", "TENDON_TAICHI_THREADS",
                                   "TENDON_TAICHI_PARALLEL_THRESHOLD", "TENDON_TAICHI_BLAS_THREADS"])
 def test_a_bad_runtime_variable_is_refused_before_any_work(cli, tmp_path, name):

@@ -7,7 +7,7 @@ import argparse
 import json
 
 from ..errors import InputError
-from ..files import write_json
+from ..files import check_folder, check_writable, write_json
 from ..solve.linear import SOLVERS
 
 PROG = "tendon-taichi"
@@ -19,6 +19,42 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str):
         raise InputError(f"{message} (see '{self.prog} --help')")
+
+
+#: the flags that name a file a command writes ("-": stdout, or the default place), and what it is
+OUTPUT_FILES = {"json": "--json file", "png": "picture", "svg": "drawing", "export": "export",
+                "vtu": "VTU file", "record": "recording"}
+
+
+def check_before_work(args) -> None:
+    """Raise InputError, before any work, for what a command would otherwise find bad
+    only after it: an output it cannot write, an extractor that is not installed."""
+    check_outputs(args)
+    check_extractor_names(args)
+
+
+def check_extractor_names(args) -> None:
+    """Raise InputError when ``--extractor``/``--extractors`` names one that is not installed."""
+    from ..extract.plugins import available_extractors
+
+    names = getattr(args, "extractors", None) or []
+    if getattr(args, "extractor", None) is not None:
+        names = [args.extractor]
+    installed = sorted(available_extractors())
+    missing = [name for name in names if name not in installed]
+    if missing:
+        raise InputError(f"unknown extractor '{missing[0]}' (installed: {', '.join(installed) or 'none'})")
+
+
+def check_outputs(args) -> None:
+    """Raise InputError, before any work, when a file a flag names (:data:`OUTPUT_FILES`)
+    or the ``--out`` folder cannot be written; makes nothing."""
+    for flag, what in OUTPUT_FILES.items():
+        value = getattr(args, flag, None)
+        if isinstance(value, str) and value != "-":
+            check_writable(value, what, make=False)
+    if getattr(args, "out", None) is not None:
+        check_folder(args.out)
 
 
 def json_out(args, data: dict) -> None:

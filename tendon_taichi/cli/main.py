@@ -19,7 +19,7 @@ import sys
 from ..errors import InputError, Stopped, TendonError
 from ..physics import runtime
 from . import batch, design, runs, tendons
-from .common import PROG, Parser
+from .common import PROG, Parser, check_before_work
 
 
 #: the exit status when stdout's reader went away (128 + SIGPIPE, as a shell reports it)
@@ -82,6 +82,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.max_dofs < 1:
                 raise InputError(f"--max-dofs must be >= 1 (got {args.max_dofs})")
             os.environ["TENDON_TAICHI_MAX_DOFS"] = str(args.max_dofs)  # worker processes read it too
+        check_before_work(args)
         runtime.configure(arch=args.arch, threads=args.threads)
         runtime.check()
         return int(args.func(args) or 0)
