@@ -83,10 +83,18 @@ class TableReader:
                              f"{', '.join(repr(k) for k in unknown)} in {self.where}")
 
 
+#: the largest magnitude of a point's coordinate (m, or m/s^2 for gravity): far beyond any
+#: robot, and far below where squaring it (lengths, areas) overflows
+MAX_COORDINATE = 1e6
+
+
 def as_point(v, where: str) -> tuple[float, float]:
-    """``[x, y]`` with two finite numbers as a tuple; SceneError naming ``where`` otherwise."""
+    """``[x, y]`` with two finite numbers of magnitude at most :data:`MAX_COORDINATE`
+    as a tuple; SceneError naming ``where`` otherwise."""
     if (not isinstance(v, list) or len(v) != 2
             or any(isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c)
                    for c in v)):
         raise SceneError(f"{where} must be [x, y] with two finite numbers (got {v!r})")
+    if max(abs(v[0]), abs(v[1])) > MAX_COORDINATE:
+        raise SceneError(f"{where} must be [x, y] with numbers of magnitude at most {MAX_COORDINATE:g} (got {v!r})")
     return (float(v[0]), float(v[1]))

@@ -179,6 +179,17 @@ def test_a_scene_name_cannot_steer_default_outputs(cli, tmp_path):
     assert written == ["a/b/recordings/_.._escaped_x-r1-simulate.npz", "a/b/s.toml"]
 
 
+def test_a_scene_name_cannot_steer_where_planted_writes(cli, tmp_path):
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    text = load_scene("t_shape").source.replace('name = "t_shape"', 'name = "../../escaped"')
+    (work / "s.toml").write_text(text)
+    r = cli("planted", "s.toml", "--level", 1, "--tendons", 1, cwd=work)
+    assert r.returncode == 0, r.stderr
+    written = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*") if p.is_file())
+    assert written == ["a/b/_.._escaped_planted_1t_s0.json", "a/b/_.._escaped_planted_1t_s0.toml", "a/b/s.toml"]
+
+
 def test_a_kernel_cache_that_cannot_be_written_is_a_warning_not_a_crash(tmp_path, monkeypatch, capsys):
     """Taichi aborts the process when it cannot save its kernel cache (a home folder
     that is not the user's); the runtime then starts without the cache and says so."""

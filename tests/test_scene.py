@@ -208,6 +208,12 @@ BAD = {
                             .replace("goal = [0.02, 0.05]", ""), "goal is required"),
     "no fixed": ("name = 'x'\n[body]\noutline = [[0, 0], [1, 0], [0, 1]]\n[[targets]]\npoint = [0.1, 0.1]\n"
                  "goal = [0.1, 0.1]\n", "[[fixed]]"),
+    "a sliver": (SQUARE.format(outline="[[0, 0], [0.04, 0], [0.04, 1e-12], [0, 1e-12]]"),
+                 "body.outline is too thin to mesh: "),
+    "deeply nested TOML": ("x = " + "[" * 5000 + "]" * 5000 + "\n", "nested too deeply"),
+    "a goal 1e300 m away": (SQUARE.format(outline="[[0, 0], [0.04, 0], [0.04, 0.04], [0, 0.04]]")
+                            .replace("goal = [0.02, 0.05]", "goal = [1e300, 0.05]"),
+                            "targets[0].goal must be [x, y] with numbers of magnitude at most 1e+06"),
     "missing mesh file": ("name = 'x'\n[body]\nmesh = 'nothere.vtu'\n[[fixed]]\nbox = [[0, 0], [1, 1]]\n"
                           "[[targets]]\npoint = [0.1, 0.1]\ngoal = [0.1, 0.1]\n", "does not exist"),
 }

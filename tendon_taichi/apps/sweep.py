@@ -212,6 +212,8 @@ def load_sweep(path: str | Path, tendons: dict | None = None) -> Sweep:
         raise InputError(f"cannot read sweep file '{path}': {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"sweep file '{path}': invalid TOML: {exc}") from None
+    except RecursionError:
+        raise InputError(f"sweep file '{path}': invalid TOML: arrays or tables nested too deeply") from None
     sw = parse_sweep(doc, str(path), path.resolve().parent, tendons)
     return Sweep(**{**sw.__dict__, "path": path})
 

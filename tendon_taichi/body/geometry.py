@@ -52,6 +52,20 @@ def polygon_self_intersects(poly: np.ndarray) -> bool:
     return not shapely.LinearRing(poly).is_simple
 
 
+#: a polygon whose mean width (2 area / perimeter) is below this fraction of its extent is
+#: too thin to mesh: a quality triangulation needs elements as small as the width
+MIN_WIDTH_RATIO = 1e-4
+
+
+def polygon_too_thin(poly: np.ndarray) -> float | None:
+    """The mean width 2 A / P (m) of a polygon (k, 2) thinner than :data:`MIN_WIDTH_RATIO`
+    of its extent (triangle would refine it almost without end), else None."""
+    poly = normalize_polygon(poly)
+    perimeter = float(np.linalg.norm(np.roll(poly, -1, axis=0) - poly, axis=1).sum())
+    width = 2.0 * abs(signed_area(poly)) / perimeter
+    return width if width < MIN_WIDTH_RATIO * np.ptp(poly, axis=0).max() else None
+
+
 def points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """Whether each point lies strictly inside the polygon (k, 2): bool (q,); points
     on its boundary are outside."""

@@ -46,7 +46,8 @@ import numpy as np
 from ..errors import SceneError
 from ..objective.settings import OptimizeSettings, read_optimize
 from ..tables import TableReader, as_point
-from .geometry import normalize_polygon, polygon_self_intersects, polygons_overlap
+from .geometry import (MIN_WIDTH_RATIO, normalize_polygon, polygon_self_intersects, polygon_too_thin,
+                       polygons_overlap)
 
 
 @dataclass(frozen=True)
@@ -218,6 +219,7 @@ def _read_body(r: TableReader, base_dir: Path | None, check_files: bool = True) 
         outline = r.polygon(r.raw("outline"), "outline")
         if polygon_self_intersects(outline):
             raise SceneError(f"{r.origin}: body.outline is self-intersecting or degenerate")
+        _check_width(outline, f"{r.origin}: body.outline")
         outline = normalize_polygon(outline, ccw=True)
         if r.has("holes"):
             raw = r.raw("holes")
@@ -228,6 +230,7 @@ def _read_body(r: TableReader, base_dir: Path | None, check_files: bool = True) 
                 hole = r.polygon(poly, f"holes[{i}]")
                 if polygon_self_intersects(hole):
                     raise SceneError(f"{r.origin}: body.holes[{i}] is self-intersecting or degenerate")
+                _check_width(hole, f"{r.origin}: body.holes[{i}]")
                 hs.append(normalize_polygon(hole, ccw=False))
             holes = tuple(hs)
             problem = polygons_overlap(outline, holes)
@@ -269,6 +272,13 @@ def _array_of_tables(doc: TableReader, key: str, prefix: str = "") -> list[dict]
     return items
 
 
+def _check_width(poly: np.ndarray, where: str) -> None:
+    width = polygon_too_thin(poly)
+    if width is not None:
+        raise SceneError(f"{where} is too thin to mesh: {width:.3g} m wide on average, under "
+                         f"{MIN_WIDTH_RATIO:g} of its extent")
+
+
 def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None,
                 default_name: str = "scene", check_files: bool = True) -> Scene:
     """Parse and validate scene TOML ``text``; ``origin`` names it in errors.
@@ -278,6 +288,8 @@ def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None
         doc_raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{origin}: invalid TOML: {exc}") from None
+    except RecursionError:
+        raise SceneError(f"{origin}: invalid TOML: arrays or tables nested too deeply") from None
     doc = TableReader(doc_raw, "scene", origin)
     name = doc.raw("name") if doc.has("name") else default_name
     if not isinstance(name, str) or not name:

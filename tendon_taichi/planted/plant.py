@@ -24,7 +24,7 @@ from ..body.cables import CableSet
 from ..body.problem import Problem, build_problem
 from ..body.scene import Scene, load_scene, parse_scene
 from ..errors import ConvergenceError, InputError
-from ..files import atomic_path
+from ..files import atomic_path, file_stem
 from ..physics.model import Model
 from ..solve.newton import NewtonSolver
 from .walk import PlantedTendon, PlantSettings, Region, Walker, draw_layout, path_segments
@@ -242,11 +242,12 @@ def layout_json(layout: dict) -> str:
 
 
 def write_planted(out_dir, text: str, layout: dict):
-    """Write ``DIR/<name>.toml`` and ``DIR/<name>.json`` atomically (both or neither);
-    return their paths."""
+    """Write ``DIR/<name>.toml`` and ``DIR/<name>.json`` atomically (both or neither),
+    the name made one file's (:func:`~tendon_taichi.files.file_stem`: a scene named
+    like a path writes inside ``DIR``); return their paths."""
 
-    out = Path(out_dir)
-    toml_path, json_path = out / f"{layout['name']}.toml", out / f"{layout['name']}.json"
+    out, stem = Path(out_dir), file_stem(layout["name"])
+    toml_path, json_path = out / f"{stem}.toml", out / f"{stem}.json"
     with atomic_path(toml_path) as tmp_toml, atomic_path(json_path) as tmp_json:
         tmp_toml.write_text(text)
         tmp_json.write_text(layout_json(layout))
