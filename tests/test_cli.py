@@ -113,6 +113,10 @@ def test_malformed_scene_gives_one_line_and_writes_nothing(cli, tmp_path, case):
     (["simulate", "finger", "--resolution", 99, "--uniform", 0.05], "finger at level 99 would have about 1.4e+32"),
     (["--max-dofs", 100, "simulate", "finger", "--uniform", 0.05], "more than 100 (--max-dofs 100)"),
     (["--max-dofs", 0, "simulate", "finger", "--uniform", 0.05], "--max-dofs must be >= 1"),
+    (["--threads", 100000, "simulate", "finger", "--uniform", 0.05], "threads must be 1.."),
+    (["optimize", "t_shape", "--k0", 1, "--k-min", 5], "homotopy.k_min (5) must be <= k0 (1)"),
+    (["bench", "--forward-max-fibers", -1], "--forward-max-fibers must be >= 0"),
+    (["sweep", "s.toml", "--scheduler", "not a url"], "--scheduler 'not a url' is not a Dask scheduler address"),
 ])
 def test_bad_command_lines(cli, tmp_path, args, message):
     _assert_one_line_error(cli(*args, cwd=tmp_path), message)

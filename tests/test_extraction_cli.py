@@ -252,6 +252,7 @@ def _one_line(r, text):
 
 def test_extract_bad_input(run_rrd, cli, tmp_path):
     _one_line(cli("extract", run_rrd, "--extractor", "nope", "--no-record"), "unknown extractor 'nope'")
+    _one_line(cli("--max-dofs", 10, "replay", run_rrd), "has 714 degrees of freedom and 548 fibers, more than 10")
     _one_line(cli("extract", run_rrd, "--extractor", "strands", "--option", "speed=3", "--no-record"),
               "has no option 'speed'")
     _one_line(cli("extract", run_rrd, "--extractor", "strands", "--stage", 9, "--no-record"), "--stage 9")

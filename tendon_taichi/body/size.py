@@ -63,3 +63,12 @@ def check_size(name: str, level: int, area: float, max_triangle_area: float, spa
         raise SceneError(f"{name} at level {level} would have about {dofs:.2g} degrees of freedom and "
                          f"{fibers:.2g} fibers, more than {limit} ({source}); lower the resolution, "
                          f"raise max_triangle_area or spacing, or give --max-dofs")
+
+
+def check_built(name: str, level: int, dofs: int, fibers: int) -> None:
+    """Raise SceneError when a problem already meshed (a recorded run's) exceeds
+    :func:`max_dofs`."""
+    limit, source = max_dofs()
+    if limit is not None and max(dofs, fibers) > limit:
+        raise SceneError(f"{name} at level {level} has {dofs} degrees of freedom and {fibers} fibers, "
+                         f"more than {limit} ({source})")

@@ -23,6 +23,8 @@ def cmd_bench(args) -> int:
     scene = load_scene(args.scene)
     if args.repeat < 1 or any(lv < 1 for lv in args.levels):
         raise InputError("--repeat and --levels must be >= 1")
+    if args.forward_max_fibers < 0:
+        raise InputError(f"--forward-max-fibers must be >= 0 (got {args.forward_max_fibers})")
     optimize_levels = [] if args.no_optimize else args.optimize_levels
     workers, scheduler = cluster_args(args)
     workers = 0 if workers is None and scheduler is None else workers
@@ -120,6 +122,9 @@ def add_cluster_flags(p: argparse.ArgumentParser, default_workers: str) -> None:
 def cluster_args(args) -> tuple[int | None, str | None]:
     if args.workers is not None and args.workers < 0:
         raise InputError(f"--workers must be >= 0 (got {args.workers})")
+    if args.scheduler is not None:
+        from ..tasks.engine import check_address
+        check_address(args.scheduler)
     return args.workers, args.scheduler
 
 

@@ -38,6 +38,7 @@ from ..body.fibers import FiberGraph
 from ..body.mesh import Embedding, Mesh
 from ..body.problem import Problem
 from ..body.scene import parse_scene
+from ..body.size import check_built
 from ..errors import TendonError
 from ..files import locked, replace_with_bytes
 from ..objective.settings import OptimizeSettings, settings_dict, settings_from_dict
@@ -262,7 +263,9 @@ class RecordedRun:
         fibers = FiberGraph(a["fiber_nodes"], Embedding(a["fiber_nodes_tri"].astype(np.int64),
                                                         a["fiber_nodes_bary"]),
                             a["fibers"].astype(np.int64), float(a["spacing"][0]))
-        return Problem(scene, int(self.meta["resolution"]), mesh, a["fixed"].astype(bool), fibers,
+        fixed = a["fixed"].astype(bool)
+        check_built(scene.name, int(self.meta["resolution"]), int(2 * (~fixed).sum()), fibers.n_fibers)
+        return Problem(scene, int(self.meta["resolution"]), mesh, fixed, fibers,
                        Embedding(a["target_tri"].astype(np.int64), a["target_bary"]), a["target_goal"])
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import field, make_dataclass
 
+from ..errors import SceneError
 from ..tables import TableReader
 from .setting import Setting
 from .terms import registered
@@ -76,6 +77,9 @@ def read_optimize(r: TableReader, fibers) -> OptimizeSettings:
         h = TableReader(r.raw("homotopy"), f"{r.where}.homotopy", r.origin)
         hom = Homotopy(**{s.name: s.read(h, fibers) for s in HOMOTOPY})
         h.finish()
+        if hom.k_min > hom.k0:
+            raise SceneError(f"{r.origin}: {r.where}.homotopy.k_min ({hom.k_min:g}) must be <= k0 "
+                             f"({hom.k0:g}), else no homotopy stage runs")
     values = {s.name: s.read(r, fibers) for s in SETTINGS if s.table is None}
     r.finish()
     return OptimizeSettings(**values, homotopy=hom)

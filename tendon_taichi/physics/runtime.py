@@ -55,9 +55,7 @@ def configure(arch: str | None = None, threads: int | None = None,
             raise InputError(f"Taichi already runs on '{_state['arch']}'; cannot switch to '{arch}'")
         _settings["arch"] = arch
     if threads is not None:
-        if threads < 1:
-            raise InputError(f"threads must be >= 1 (got {threads})")
-        _settings["threads"] = threads
+        _settings["threads"] = _checked_threads(threads, "threads")
     if parallel_threshold is not None:
         _settings["parallel_threshold"] = int(parallel_threshold)
 
@@ -81,11 +79,24 @@ def _env_int(name: str) -> int | None:
         raise InputError(f"{name} must be an integer (got '{env}')") from None
 
 
+#: the most CPU threads allowed per core: far more only starves the machine (100000 hung it)
+MAX_THREADS_PER_CORE = 4
+
+
+def _checked_threads(n: int, name: str) -> int:
+    """``n`` CPU threads, or InputError naming ``name`` when not 1 .. MAX_THREADS_PER_CORE x cores."""
+    most = MAX_THREADS_PER_CORE * cores()
+    if not 1 <= n <= most:
+        raise InputError(f"{name} must be 1..{most} ({MAX_THREADS_PER_CORE} per core of this machine's "
+                         f"{cores()}; got {n})")
+    return n
+
+
 def _requested_threads() -> int | None:
     if _settings["threads"] is not None:
         return _settings["threads"]
     n = _env_int("TENDON_TAICHI_THREADS")
-    return None if n is None else max(1, n)
+    return None if n is None else _checked_threads(max(1, n), "TENDON_TAICHI_THREADS")
 
 
 def __getattr__(name: str):

@@ -133,6 +133,22 @@ def execute(fn: Callable[..., dict], args: tuple, stop: tuple[type[BaseException
 
 
 # ---------------------------------------------------------------- clients
+def check_address(scheduler: str) -> None:
+    """Raise InputError when ``scheduler`` is no Dask address (``tcp://host:port``,
+    ``host:port``...): found before any work, and before a client that could not
+    start prints its own traceback when collected."""
+    from distributed.comm import parse_address
+    from distributed.comm.addressing import parse_host_port
+
+    try:
+        protocol, location = parse_address(scheduler)
+        if protocol != "inproc":
+            parse_host_port(location)
+    except ValueError as exc:
+        raise InputError(f"--scheduler '{scheduler}' is not a Dask scheduler address (like "
+                         f"tcp://host:8786): {exc}") from None
+
+
 @contextlib.contextmanager
 def connect(workers: int | None, scheduler: str | None, progress: Callable[[str], None],
             setup: Callable[[int | None], dict] | None = None):
