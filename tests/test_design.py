@@ -88,6 +88,9 @@ def test_design_writes_every_output_and_nothing_else(designed):
     chosen = next(e for e in summary["front"] if e["count"] == rec["count"])
     assert m["realizable_pose_error_rel"] == chosen["realizable_pose_error_rel"]
     assert summary["search"]["beam"] == 3 and summary["search"]["converged_resolution"] == 2
+    outside = m["realizable_pose_error_rel"] > summary["budget"]
+    assert any("within the budget" in w for w in summary["warnings"]) == outside
+    assert all(f"tendon-taichi: warning: {w}" in r.stderr for w in summary["warnings"])
     # the table on stdout, the stages and the route optimization on stderr
     assert "recommended:" in r.stdout and re.search(r"tendon 1: .* cm, pull", r.stdout)
     assert "stage 0" in r.stderr and "design: strands" in r.stderr and "optimizing" in r.stderr
@@ -174,6 +177,16 @@ def test_recommendation_is_the_fewest_tendons_within_the_budget():
     assert recommend(entries, 0.003, None)["id"] == "3-0.001-0.9-0.2"
     assert recommend(entries, 0.0005, None)["id"] == "3-0.001-0.9-0.2"  # none within: the lowest error
     assert recommend(entries, 0.005, 1)["id"] == "1-0.02-1.0-0.1"
+
+
+def test_a_recommendation_outside_the_budget_comes_with_a_warning():
+    from tendon_taichi.apps.design import _budget_warning
+
+    summary = {"budget": 0.005, "recommended": {"metrics": {"realizable_pose_error_rel": 0.02}}}
+    assert _budget_warning(summary) == ["no layout found is within the budget of 0.5% of L: the recommended one "
+                                        "is the most accurate, 2.00% of L as built"]
+    summary["recommended"]["metrics"]["realizable_pose_error_rel"] = 0.005
+    assert _budget_warning(summary) == []
 
 
 def test_a_capstan_limit_takes_the_fewest_tendons_that_keep_it():

@@ -194,6 +194,7 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
         progress.message(f"design: {pool.broken}")
     summary["timing"]["optimize_s"] = run.summary["time_s"]
     summary["timing"]["workers"] = workers
+    summary["warnings"] = list(run.warnings) + _budget_warning(summary)
     summary["files"] = _write(out, ex, layout, summary, png)
     summary["time_s"] = time.perf_counter() - t0
     write_json(summary, out / "design.json")
@@ -249,6 +250,15 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
                              converge_s=None if fine is None else fine["time_s"],
                              route_s=summary["timing"]["route_s"] + front.route_s)
     return ex, layout, summary
+
+
+def _budget_warning(summary: dict) -> list[str]:
+    """A warning, as a list, when the recommended layout is not within the budget."""
+    error = summary["recommended"]["metrics"]["realizable_pose_error_rel"]
+    if error <= summary["budget"]:
+        return []
+    return [f"no layout found is within the budget of {100 * summary['budget']:g}% of L: the recommended "
+            f"one is the most accurate, {100 * error:.2f}% of L as built"]
 
 
 def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings, solver: str, log,

@@ -84,6 +84,8 @@ def cmd_design(args) -> int:
                     workers=default_workers() if args.workers is None else args.workers,
                     routes_from=args.routes_from, min_capstan=args.min_capstan, **front)
     summary = result.summary
+    for w in summary["warnings"]:
+        print(f"{PROG}: warning: {w}", file=sys.stderr)
     json_out(args, summary)
     if args.json != "-":
         print("\n".join(table(summary)))
