@@ -23,6 +23,7 @@ class NetworkDiscoveryExtractor(Extractor):
     class Options:
         threshold: float = 0.2      # keep fibers with tau >= threshold x max tau
         min_length: float = 0.01    # m
+        ranges = {"threshold": (0.0, 1.0), "min_length": (0.0, None)}  # checked by make_options
 
     def extract(self, problem, state: IdealizedState, options) -> list[Tendon]:
         view = FiberView(problem)

@@ -29,6 +29,8 @@ class StrandsExtractor(Extractor):
         bridge_gaps: bool = True    # continue across one slack fiber
         min_length: float = 0.01    # m
         min_tension: float = 0.25   # drop strands weaker than this x the strongest one
+        ranges = {"max_turn": (0.0, 180.0), "tension_tol": (0.0, None), "min_length": (0.0, None),
+                  "min_tension": (0.0, 1.0)}  # checked by make_options
 
     def extract(self, problem, state: IdealizedState, options) -> list[Tendon]:
         view = FiberView(problem)

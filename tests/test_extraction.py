@@ -69,6 +69,21 @@ def test_unknown_extractor_and_bad_options():
     assert load_extractor("strands").make_options({"bridge_gaps": "no"}).bridge_gaps is False
 
 
+@pytest.mark.parametrize("name,key,value,message", [
+    ("strands", "min_length", "-5", "option 'min_length' must be >= 0 (got -5)"),
+    ("strands", "max_turn", -5.0, "option 'max_turn' must be in [0, 180] (got -5)"),
+    ("path_cover", "tension_tol", "-3", "option 'tension_tol' must be >= 0 (got -3)"),
+    ("path_cover", "min_tension", "1.5", "option 'min_tension' must be in [0, 1] (got 1.5)"),
+    ("network_discovery", "threshold", "-1", "option 'threshold' must be in [0, 1] (got -1)"),
+])
+def test_an_option_outside_its_range_is_refused(name, key, value, message):
+    with pytest.raises(PluginError, match=re.escape(f"extractor '{name}': {message}")):
+        load_extractor(name).make_options({key: value})
+    ends = load_extractor(name).Options.ranges[key]
+    edge = ends[0] if ends[0] is not None else ends[1]
+    assert getattr(load_extractor(name).make_options({key: str(edge)}), key) == edge  # the ends are allowed
+
+
 @pytest.mark.parametrize("name", BUILTIN)
 def test_straight_strand_is_one_straight_tendon(square, name):
     tau = np.zeros(square.fibers.n_fibers)

@@ -148,7 +148,9 @@ class Extractor:
     @classmethod
     def make_options(cls, values: dict[str, str | float | int | bool] | None = None):
         """Options from ``{name: value}``; strings (from the command line) are
-        converted to each field's type. Unknown names or bad values raise PluginError."""
+        converted to each field's type. Unknown names, bad values and values outside
+        the ``Options.ranges`` ``{name: (low, high)}`` (inclusive; None: open) raise
+        PluginError."""
         known = {f.name: f for f in cls.option_fields()}
         kwargs = {}
         for key, raw in (values or {}).items():
@@ -156,7 +158,20 @@ class Extractor:
                 raise PluginError(f"extractor '{cls.name}' has no option '{key}' "
                                   f"(options: {', '.join(known) or 'none'})")
             kwargs[key] = _convert(cls.name, known[key], raw)
+            _check_range(cls.name, key, kwargs[key], getattr(cls.Options, "ranges", {}).get(key))
         return cls.Options(**kwargs)
+
+
+def _check_range(name: str, key: str, value, bounds: tuple | None) -> None:
+    """PluginError when a number ``value`` lies outside ``bounds`` (low, high), None ends open."""
+    if bounds is None or isinstance(value, bool) or not isinstance(value, (int, float)):
+        return
+    low, high = bounds
+    if (low is None or value >= low) and (high is None or value <= high):
+        return
+    want = (f"in [{low:g}, {high:g}]" if low is not None and high is not None
+            else f">= {low:g}" if low is not None else f"<= {high:g}")
+    raise PluginError(f"extractor '{name}': option '{key}' must be {want} (got {value:g})")
 
 
 def _convert(name: str, fld: dataclasses.Field, raw):
