@@ -21,9 +21,11 @@ class Parser(argparse.ArgumentParser):
         raise InputError(f"{message} (see '{self.prog} --help')")
 
 
-#: the flags that name a file a command writes ("-": stdout, or the default place), and what it is
+#: the flags that name a file a command writes ("-": stdout, or the default place), and what it
+#: is; ``--record`` is checked by the commands themselves (a tendons file must also be an .rrd of
+#: the same run)
 OUTPUT_FILES = {"json": "--json file", "png": "picture", "svg": "drawing", "export": "export",
-                "vtu": "VTU file", "record": "recording"}
+                "vtu": "VTU file"}
 
 
 def check_before_work(args) -> None:
