@@ -164,6 +164,15 @@ def test_wrong_length_contract_file(cli, tmp_path):
     _assert_one_line_error(r, "has 548 fibers")
 
 
+def test_a_contract_file_must_be_a_1d_npy_array(cli, tmp_path):
+    np.save(tmp_path / "square.npy", np.zeros((3, 3)))
+    (tmp_path / "text.npy").write_text("0.1 0.2\n")
+    _assert_one_line_error(cli("simulate", "t_shape", "--contract", tmp_path / "square.npy", cwd=tmp_path),
+                           "holds a (3, 3) array: give one ratio per fiber")
+    _assert_one_line_error(cli("simulate", "t_shape", "--contract", tmp_path / "text.npy", cwd=tmp_path),
+                           "is not a .npy file")
+
+
 @pytest.mark.parametrize("name,stem", [("t_shape", "t_shape"), ("../../escaped", "_.._escaped"),
                                        ("a/b", "a_b"), (".hidden", "hidden"), ("...", "unnamed"),
                                        ("fingér 2", "fingér_2")])

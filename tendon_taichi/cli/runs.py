@@ -44,7 +44,11 @@ def cmd_scenes(args) -> int:
 
 # ------------------------------------------------------------------ simulate
 def _read_ratios(path: str) -> np.ndarray:
+    """The contraction ratios in the .npy file ``path``: a number, or one per fiber (f,)."""
     try:
+        with open(path, "rb") as fh:
+            if fh.read(6) != b"\x93NUMPY":
+                raise InputError(f"contraction file '{path}' is not a .npy file (numpy.save writes one)")
         r = np.load(path, allow_pickle=False)
     except FileNotFoundError:
         raise InputError(f"contraction file '{path}' does not exist") from None
@@ -52,6 +56,9 @@ def _read_ratios(path: str) -> np.ndarray:
         raise InputError(f"cannot read contraction file '{path}' (expected a .npy array): {exc}") from None
     if not isinstance(r, np.ndarray) or r.dtype.kind not in "fiu":
         raise InputError(f"contraction file '{path}' must hold a numeric .npy array")
+    if r.ndim > 1:
+        raise InputError(f"contraction file '{path}' holds a {r.shape} array: give one ratio per fiber, "
+                         f"a 1-D array")
     return r.astype(float).ravel()
 
 
