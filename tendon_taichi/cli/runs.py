@@ -44,7 +44,7 @@ def cmd_scenes(args) -> int:
 
 # ------------------------------------------------------------------ simulate
 def _read_ratios(path: str) -> np.ndarray:
-    """The contraction ratios in the .npy file ``path``: a number, or one per fiber (f,)."""
+    """The contraction ratios in the .npy file ``path``, one per fiber (f,)."""
     try:
         with open(path, "rb") as fh:
             if fh.read(6) != b"\x93NUMPY":
