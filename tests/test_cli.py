@@ -74,6 +74,13 @@ def test_simulate_writes_export_vtu_and_json(cli, tmp_path):
     assert np.allclose(m.point_data["displacement"][: len(d["x"]), :2], d["x"] - d["nodes"])
 
 
+def test_simulate_quiet_says_nothing_on_stderr(cli, tmp_path):
+    loud = cli("simulate", "finger", "--uniform", 0.05, "--export", tmp_path / "a.npz")
+    quiet = cli("simulate", "finger", "--uniform", 0.05, "--export", tmp_path / "b.npz", "--quiet")
+    assert loud.returncode == quiet.returncode == 0
+    assert "solving" in loud.stderr and quiet.stderr == "" and "export:" in quiet.stdout
+
+
 def test_contract_file_equals_uniform(cli, tmp_path):
     a, b = tmp_path / "a.npz", tmp_path / "b.npz"
     assert cli("simulate", "finger", "--uniform", 0.04, "--export", a).returncode == 0

@@ -75,9 +75,10 @@ def cmd_simulate(args) -> int:
                                 else _read_ratios(args.contract))
     export = Path(args.export or Path("recordings") / f"{file_stem(scene.name)}-r{problem.level}-simulate.npz")
     c = problem.counts()
-    print(f"{scene.name} level {problem.level}: {c['nodes']} nodes, {c['triangles']} "
-          f"triangles, {c['fibers']} fibers, {c['dofs']} DOFs; solving ({args.solver})...",
-          file=sys.stderr)
+    if not args.quiet:
+        print(f"{scene.name} level {problem.level}: {c['nodes']} nodes, {c['triangles']} "
+              f"triangles, {c['fibers']} fibers, {c['dofs']} DOFs; solving ({args.solver})...",
+              file=sys.stderr)
     sim = simulate(scene, problem.level, ratios, args.solver, problem=problem)
     eq = sim.equilibrium
     write_export(export, problem, eq.x, sim.ac, eq.tau)
@@ -217,6 +218,7 @@ def add_commands(sub) -> None:
     s.add_argument("--export", metavar="OUT.npz",
                    help="problem export (default recordings/<scene>-r<N>-simulate.npz)")
     s.add_argument("--vtu", metavar="OUT.vtu", help="also write the deformed mesh and fibers as VTU")
+    s.add_argument("--quiet", action="store_true", help="no progress line on stderr")
     add_json(s)
     s.set_defaults(func=cmd_simulate)
 
