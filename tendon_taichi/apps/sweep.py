@@ -29,7 +29,7 @@ from pathlib import Path
 
 from ..body.scene import Scene, load_scene, with_overrides
 from ..errors import InputError, Stopped
-from ..extract.plugins import available_extractors
+from ..extract.plugins import available_extractors, unknown_extractor
 from ..extract.settings import BUDGET, FRONT_DEFAULTS, ConsolidationSettings, front_id
 from ..files import atomic_path, write_json
 from ..io.plots import plot_sweep
@@ -130,13 +130,12 @@ def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None,
     if (not isinstance(levels, list) or not levels
             or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in levels)):
         _fail(origin, f"'levels' must be a non-empty list of integers >= 1 (got {levels!r})")
-    installed = sorted(available_extractors())
-    extractors = doc.get("extractors", installed)
+    extractors = doc.get("extractors", sorted(available_extractors()))
     if not isinstance(extractors, list) or not extractors or not all(isinstance(e, str) for e in extractors):
         _fail(origin, "'extractors' must be a non-empty list of extractor names")
-    missing = [e for e in extractors if e not in installed]
-    if missing:
-        _fail(origin, f"unknown extractor '{missing[0]}' (installed: {', '.join(installed)})")
+    unknown = unknown_extractor(extractors)
+    if unknown:
+        _fail(origin, unknown)
     solver = doc.get("solver", "auto")
     if solver not in SOLVERS:
         _fail(origin, f"'solver' must be one of {', '.join(SOLVERS)} (got {solver!r})")

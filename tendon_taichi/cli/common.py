@@ -37,15 +37,14 @@ def check_before_work(args) -> None:
 
 def check_extractor_names(args) -> None:
     """Raise InputError when ``--extractor``/``--extractors`` names one that is not installed."""
-    from ..extract.plugins import available_extractors
+    from ..extract.plugins import unknown_extractor
 
     names = getattr(args, "extractors", None) or []
     if getattr(args, "extractor", None) is not None:
         names = [args.extractor]
-    installed = sorted(available_extractors())
-    missing = [name for name in names if name not in installed]
-    if missing:
-        raise InputError(f"unknown extractor '{missing[0]}' (installed: {', '.join(installed) or 'none'})")
+    unknown = unknown_extractor(names)
+    if unknown:
+        raise InputError(unknown)
 
 
 def check_outputs(args) -> None:

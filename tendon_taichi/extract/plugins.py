@@ -16,12 +16,20 @@ def available_extractors() -> dict[str, object]:
     return {ep.name: ep for ep in entry_points(group=GROUP)}
 
 
+def unknown_extractor(names) -> str | None:
+    """The error for the first of ``names`` that is not installed (naming those that
+    are), or None when every one is."""
+    installed = sorted(available_extractors())
+    missing = [name for name in names if name not in installed]
+    return f"unknown extractor '{missing[0]}' (installed: {', '.join(installed) or 'none'})" if missing else None
+
+
 def load_extractor(name: str) -> Extractor:
     """Import and instantiate an installed extractor; one clear PluginError if it is
     unknown, fails to import, or does not follow the protocol."""
     eps = available_extractors()
     if name not in eps:
-        raise PluginError(f"unknown extractor '{name}' (installed: {', '.join(sorted(eps)) or 'none'})")
+        raise PluginError(unknown_extractor([name]))
     try:
         obj = eps[name].load()
     except Exception as exc:  # noqa: BLE001 - any import failure of a plugin
