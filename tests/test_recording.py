@@ -255,7 +255,9 @@ def test_unwritable_outputs_are_refused_before_any_work(tmp_path, cli):
     assert os.listdir(tmp_path) == ["afile"]
 
 
-def test_resume_refuses_another_resolution_or_solver(tmp_path, cli, reference):
+def test_resume_refuses_another_resolution_solver_or_scene(tmp_path, cli, reference):
+    """Before any work, and the recording untouched; a SCENE given must be the
+    recorded one, by name and TOML text."""
     path, ref = reference
     rec = tmp_path / "run.rrd"
     rec.write_bytes(path.read_bytes())
@@ -264,7 +266,14 @@ def test_resume_refuses_another_resolution_or_solver(tmp_path, cli, reference):
                     f"--resolution 2 cannot be changed when resuming (the run is at level {ref['resolution']})")
     _one_line_error(cli("optimize", "--resume", rec, "--solver", other, cwd=tmp_path),
                     f"--solver {other} cannot be changed when resuming (the run used {ref['solver']})")
-    assert rec.read_bytes() == path.read_bytes() and sorted(tmp_path.iterdir()) == [rec]
+    _one_line_error(cli("optimize", "finger", "--resume", rec, cwd=tmp_path),
+                    f"'{rec}' is a run of scene 't_shape', not 'finger' (leave SCENE out to resume the recorded one)")
+    edited = tmp_path / "t_shape.toml"
+    edited.write_text(read_recording(rec).scene_toml + "\n[optimize]\nstage_iterations = 7\n")
+    _one_line_error(cli("optimize", edited, "--resume", rec, cwd=tmp_path),
+                    f"scene 't_shape' is not the one '{rec}' ran: its TOML text differs "
+                    "(leave SCENE out to resume the recorded one)")
+    assert rec.read_bytes() == path.read_bytes() and sorted(tmp_path.iterdir()) == [rec, edited]
 
 
 def test_torn_last_frame_is_tolerated(reference, tmp_path, cli):

@@ -92,7 +92,8 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
              png: str | Path | None = None) -> RunResult:
     """Run the regularized soft IK on ``scene`` at resolution ``level`` (default
     1) with the linear ``solver`` (default "auto"), or continue the run recorded
-    in ``resume`` at its own level and solver (a different one given is refused),
+    in ``resume`` at its own level and solver and on its own scene (``scene``
+    may be None; a different level, solver or scene given is refused),
     recording every stage to ``record`` and writing the final problem export to
     ``export`` (default: beside the recording); ``png`` draws stage 0 beside the
     final stage ("-": beside the recording)."""
@@ -103,7 +104,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
         run = read_recording(resume)
         if not run.stages:
             raise RecordingError(f"'{resume}' has no completed stage to resume from")
-        _check_resumable(run.meta, level, solver)
+        _check_resumable(run, level, solver, scene)
         problem = run.problem()
         solver = run.meta.get("solver") or solver or "auto"
         completed = [_recorded_stage(rs, problem) for rs in run.stages]
@@ -189,8 +190,16 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
     return RunResult(problem, stages, summary, record, export, warnings)
 
 
-def _check_resumable(meta: dict, level: int | None, solver: str | None) -> None:
-    """Refuse a resolution or linear solver that differs from the recorded run's."""
+def _check_resumable(run, level: int | None, solver: str | None, scene: Scene | None) -> None:
+    """Refuse a resolution, linear solver or scene that differs from the recorded
+    run's (a scene: its name or its TOML text)."""
+    meta = run.meta
+    if scene is not None and scene.name != meta.get("scene"):
+        raise InputError(f"'{run.path}' is a run of scene '{meta.get('scene')}', not '{scene.name}' "
+                         f"(leave SCENE out to resume the recorded one)")
+    if scene is not None and scene.source != run.scene_toml:
+        raise InputError(f"scene '{scene.name}' is not the one '{run.path}' ran: its TOML text differs "
+                         f"(leave SCENE out to resume the recorded one)")
     if level is not None and meta.get("resolution") is not None and level != meta["resolution"]:
         raise InputError(f"--resolution {level} cannot be changed when resuming "
                          f"(the run is at level {meta['resolution']})")

@@ -135,7 +135,7 @@ def cmd_optimize(args) -> int:
     if args.resume:
         if given:
             raise InputError(f"{given[0]} cannot be changed when resuming (the recorded settings are used)")
-        scene = None
+        scene = None if args.scene is None else load_scene(args.scene)  # must be the recorded one
     else:
         if args.scene is None:
             raise InputError("a SCENE is required (or --resume RUN.rrd)")
@@ -150,9 +150,6 @@ def cmd_optimize(args) -> int:
         if args.json not in (None, "-"):
             json_out(args, exc.summary)
         raise
-    if args.resume and scene is None and args.scene is not None and args.scene != result.problem.scene.name:
-        print(f"{PROG}: warning: the recording is of scene '{result.problem.scene.name}', not "
-              f"'{args.scene}'", file=sys.stderr)
     summary = result.summary
     for w in result.warnings:
         print(f"{PROG}: warning: {w}", file=sys.stderr)
