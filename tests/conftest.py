@@ -45,12 +45,12 @@ def rng():
 def use_cholesky(monkeypatch, name: str):
     """Make the direct backend factorize with ``name`` ("qdldl" or "pardiso", the test
     skipped where MKL is not installed); its class."""
-    from tendon_taichi.solve import direct, pardiso
+    from tendon_taichi.solve import cholesky, pardiso
 
     if name == "pardiso" and not pardiso.available():
         pytest.skip("MKL PARDISO is not installed (the mkl extra)")
-    monkeypatch.setattr(direct, "pardiso_available", lambda: name == "pardiso")
-    return pardiso.PardisoLDL if name == "pardiso" else direct.LDL
+    monkeypatch.setattr(cholesky, "pardiso_available", lambda: name == "pardiso")
+    return pardiso.PardisoLDL if name == "pardiso" else cholesky.LDL
 
 
 def small_scene_toml(seed: int, extra: str = "") -> str:

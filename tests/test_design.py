@@ -16,6 +16,7 @@ import shapely
 from reference import body_forces
 from tendon_taichi.apps.design import recommend
 from tendon_taichi.io.recording import read_chunks, read_recording
+from tendon_taichi.solve.cholesky import cholesky_library
 
 SCENE = """
 name = "small finger"
@@ -58,6 +59,8 @@ def test_design_writes_every_output_and_nothing_else(designed):
     assert sorted(p.name for p in d.iterdir()) == ["finger.toml", "out", "out.json"]
     summary = json.loads((d / "out" / "design.json").read_text())
     assert summary == json.loads((d / "out.json").read_text())
+    assert summary["provenance"]["cholesky"] == cholesky_library()  # what made the design's numbers
+    assert read_recording(d / "out" / "run.rrd").meta["cholesky"] == cholesky_library()
     for key in ("scene", "resolution", "body_size", "friction", "clearance", "budget", "recommended", "front",
                 "time_s"):
         assert key in summary

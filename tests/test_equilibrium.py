@@ -264,6 +264,26 @@ def test_pardiso_solves_as_qdldl_does_and_the_same_every_time(monkeypatch):
 
 
 @pytest.mark.parametrize("cholesky", ["qdldl", "pardiso"])
+def test_the_cholesky_library_is_named_with_its_version(monkeypatch, cholesky):
+    """``cholesky_library`` names what the direct backend factorizes with and its
+    version as the installed package gives it (MKL reports its release, which the
+    wheel's version starts with: 2026.2 of 2026.2.1), and MKL's code path."""
+    import importlib.metadata as md
+    import os
+
+    from tendon_taichi.solve.cholesky import cholesky_library
+
+    use_cholesky(monkeypatch, cholesky)
+    lib = cholesky_library()
+    if cholesky == "qdldl":
+        assert lib == {"name": "qdldl", "version": md.version("qdldl")}
+        return
+    assert lib["name"] == "MKL PARDISO" and lib["build"].isdigit() and lib["code_path"]
+    if not os.environ.get("TENDON_TAICHI_MKL_RT"):  # the mkl extra's own runtime
+        assert md.version("mkl").startswith(lib["version"]) and lib["version"][:4].isdigit()
+
+
+@pytest.mark.parametrize("cholesky", ["qdldl", "pardiso"])
 def test_several_right_hand_sides_solve_in_one_call_as_one_by_one(monkeypatch, cholesky):
     """A factorization solves the columns of an (n, r) right-hand side in one call
     (the Woodbury columns of a tendon robot) as it solves each alone, to

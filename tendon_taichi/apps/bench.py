@@ -35,6 +35,7 @@ from ..io.progress import Progress
 from ..objective.term import State
 from ..optimizer.soft_ik import ADJOINT_TOL, SoftIK
 from ..physics import runtime
+from ..solve.cholesky import cholesky_library
 from ..solve.linear import resolve_solver
 from ..solve.newton import NewtonSolver
 from ..solve.pardiso import available as pardiso_available
@@ -279,7 +280,8 @@ def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int =
     # each backend's first solve in the process included compiling its kernels
     comp = sum(f["first_solve_s"] - f["equilibrium_cold_s"]["median"] for f in rows[0]["solvers"].values())
     result = {"scene": scene.name, "machine": machine(), "compile_s": comp, "repeat": repeat, "levels": rows,
-              "exponents": exponents(rows), "optimize_engine": report.engine, "provenance": provenance()}
+              "exponents": exponents(rows), "optimize_engine": report.engine,
+              "provenance": {**provenance(), "cholesky": cholesky_library()}}
     write_outputs(result, out_dir)
     if report.interrupted:
         raise Stopped(f"interrupted during the optimizations; {len(report.outcomes)} of {len(jobs)} finished "

@@ -38,6 +38,7 @@ from ..io.plots import plot_design, plot_front
 from ..io.progress import Progress
 from ..io.recording import rewrite
 from ..physics import runtime
+from ..solve.cholesky import cholesky_library
 from ..tasks.pool import Pool
 from ..version import provenance
 from .extract import Extraction, extract, frictionless_error, log_layout
@@ -311,7 +312,7 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], bud
                             **({"error": r.error} if r.error else {})} for r in ex.results],
             "timing": {"optimize_s": None, "extract_s": None, "route_s": sum(c.route_s for c in done),
                        "route_evaluations": sum(c.route_evaluations for c in done)},
-            "provenance": provenance()}
+            "provenance": {**provenance(), "cholesky": cholesky_library()}}
 
 
 def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool) -> dict:

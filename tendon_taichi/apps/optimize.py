@@ -21,6 +21,7 @@ from ..io.recording import Recorder, RecordingError, completed_chunks, read_reco
 from ..objective.settings import settings_dict
 from ..optimizer.homotopy import RunCallbacks, StageResult, run_schedule
 from ..optimizer.soft_ik import Figures, Iterate, SoftIK, active_set
+from ..solve.cholesky import cholesky_library
 from ..version import __version__
 
 #: a final pose error above this share of L draws a warning (the goals were not reached)
@@ -116,7 +117,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
         default = Path("recordings") / f"{file_stem(scene.name)}-r{problem.level}.rrd"
         record = Path(record) if record is not None else default
         meta = {"version": __version__, "run_id": uuid.uuid4().hex, "scene": scene.name,
-                "resolution": problem.level, "solver": solver, "log_every": log_every}
+                "resolution": problem.level, "solver": solver, "log_every": log_every, "cholesky": cholesky_library()}
     if record.suffix != ".rrd":
         raise InputError(f"the recording must be an .rrd file (got '{record}')")
     export = Path(export) if export is not None else record.with_suffix(".npz")

@@ -34,6 +34,7 @@ from ..extract.settings import BUDGET, FRONT_DEFAULTS, ConsolidationSettings, fr
 from ..files import atomic_path, write_json
 from ..io.plots import plot_sweep
 from ..io.progress import Progress
+from ..solve.cholesky import cholesky_library
 from ..solve.linear import SOLVERS
 from ..tasks.engine import Task, case_id, run_tasks
 from ..version import provenance
@@ -278,7 +279,8 @@ def run(sweep: Sweep | str | Path, out_dir: str | Path, workers: int | None = No
               "solver": sw.solver, "grid": sw.grid, "set": sw.fixed, "consolidation": sw.consolidation,
               "front": sw.front, "cases": rows,
               "failed": sum("error" in r for r in rows), "reused": sum(r["reused"] for r in rows),
-              "interrupted": report.interrupted, "engine": report.engine, "provenance": provenance(),
+              "interrupted": report.interrupted, "engine": report.engine,
+              "provenance": {**provenance(), "cholesky": cholesky_library()},
               "time_s": time.perf_counter() - t0}
     write_outputs(result, out)
     if report.interrupted:

@@ -43,6 +43,7 @@ from ..extract.realizable import solve_realizable_poses
 from ..extract.settings import FRONT_DEFAULTS, front_id
 from ..files import atomic_path, file_stem, write_json
 from ..io.progress import Progress
+from ..solve.cholesky import cholesky_library
 from ..tasks.engine import Task, case_id, run_tasks
 from ..version import provenance
 from .gallery import plot_gallery
@@ -294,7 +295,7 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
              for case in suite]
     by_name = {c.name: c for c in suite}
     result = {"suite": str(directory), "level": level, "settings": overrides, "consolidation": cons,
-              "tendons": tendons, "front_search": search, "provenance": provenance(), "cases": []}
+              "tendons": tendons, "front_search": search, "provenance": {**provenance(), "cholesky": cholesky_library()}, "cases": []}
     done = {}
 
     def on_outcome(o) -> None:

@@ -12,5 +12,6 @@ __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     ".preconditioner": ("ReusedPreconditioner",),
     ".multigrid": ("MultigridPreconditioner", "rigid_modes"),
     ".direct": ("DirectSolver", "Factorization"),
+    ".cholesky": ("LDL", "cholesky_library"),
     ".newton": ("NewtonSolver", "Equilibrium"),
 })

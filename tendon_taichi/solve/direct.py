@@ -32,18 +32,16 @@ from functools import cached_property
 from typing import Iterable, Iterator
 
 import numpy as np
-import qdldl
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import ConvergenceError
 from ..physics.capstan import perp
 from ..physics.model import Model
-from ._csc import triangle
 from ._newton_kernels import direction_from
 from .linear import LinearSolver, LinearStats
+from .cholesky import LDL, cholesky_class
 from .pardiso import PardisoLDL
-from .pardiso import available as pardiso_available
 
 
 @dataclass
@@ -62,39 +60,6 @@ class Assembled:
         if len(self.K):
             out += self.U @ (self.K * (self.U.T @ y))
         return out
-
-
-class LDL:
-    """LDL^T factorizations (qdldl) of symmetric matrices of one sparsity pattern
-    (CSC ``indptr``, ``indices``, n x n): the symbolic analysis with the first,
-    only the numbers after. qdldl orders every pattern by its own AMD, so
-    ``reorder`` (:class:`~tendon_taichi.solve.pardiso.PardisoLDL`'s) changes
-    nothing here. One factorization is current at a time (``generation`` counts
-    them)."""
-
-    def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int, reorder: bool = False):
-        self.upper, self.indices, self.indptr = triangle(indptr, indices, n)
-        self.n = n
-        self.reorder = reorder
-        self.solver = None
-        self.generation = 0
-
-    def factor(self, data: np.ndarray) -> bool:
-        """Factorize the matrix of entries ``data`` (in the pattern's order); whether
-        it is positive definite (every pivot > 0), else the factors are not to be used."""
-        A = sp.csc_matrix((data[self.upper], self.indices, self.indptr), shape=(self.n, self.n))
-        if self.solver is None:
-            self.solver = qdldl.Solver(A, upper=True)
-        else:
-            self.solver.update(A, upper=True)
-        self.generation += 1
-        return bool(np.all(self.solver.factors()[1] > 0.0))
-
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        """A^-1 b with the current factorization, b (n,) or (n, r)."""
-        if np.ndim(b) == 2:
-            return np.column_stack([self.solver.solve(c) for c in np.asarray(b).T]) if b.shape[1] else b.copy()
-        return self.solver.solve(b)
 
 
 class Factorization:
@@ -453,8 +418,7 @@ class DirectSolver(LinearSolver):
     def factorize(self, H: Assembled) -> Factorization:
         """Factorize an ordered Hessian (:meth:`assemble_ordered`)."""
         if self.pattern.ldl is None:
-            cholesky = PardisoLDL if pardiso_available() else LDL
-            self.pattern.ldl = cholesky(self.indptr, self.indices, self.shape[0], self.pattern.reorder)
+            self.pattern.ldl = cholesky_class()(self.indptr, self.indices, self.shape[0], self.pattern.reorder)
         return Factorization(H, self.order, self.pattern.ldl)
 
     def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:

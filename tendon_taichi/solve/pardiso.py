@@ -43,6 +43,7 @@ from __future__ import annotations
 import ctypes
 import glob
 import os
+import re
 import sys
 from ctypes.util import find_library
 
@@ -83,7 +84,7 @@ def _load():
         except (OSError, AttributeError):  # not there, or not an MKL runtime we know
             continue
         fn.restype = None
-        _lib.update(set_threads=lib.MKL_Set_Num_Threads_Local, threaded=layer == MKL_THREADING_INTEL)
+        _lib.update(set_threads=lib.MKL_Set_Num_Threads_Local, threaded=layer == MKL_THREADING_INTEL, mkl=lib)
         break
     _lib["pardiso"] = fn
     return fn
@@ -92,6 +93,37 @@ def _load():
 def available() -> bool:
     """Whether MKL PARDISO loaded (the ``mkl`` extra is installed)."""
     return _load() is not None
+
+
+class _Version(ctypes.Structure):
+    """MKL's ``MKLVersion``."""
+
+    _fields_ = [("major", ctypes.c_int), ("minor", ctypes.c_int), ("update", ctypes.c_int), ("patch", ctypes.c_int),
+                ("status", ctypes.c_char_p), ("build", ctypes.c_char_p), ("processor", ctypes.c_char_p),
+                ("platform", ctypes.c_char_p)]
+
+
+def describe() -> dict | None:
+    """The MKL that loaded, as it reports itself: ``version`` (its release, e.g.
+    "2026.2"), ``build`` (a date) and ``code_path`` (the instruction set it runs
+    on here, e.g. "AVX-512"); None where it did not load. A factorization's
+    round-off, and so a design's, depends on all three."""
+    if _load() is None:
+        return None
+    lib = _lib["mkl"]
+    text = ctypes.create_string_buffer(512)
+    v = _Version()
+    try:
+        lib.MKL_Get_Version_String(text, len(text))
+        lib.MKL_Get_Version(ctypes.byref(v))
+    except AttributeError:  # an MKL runtime without them
+        return {"version": None, "build": None, "code_path": None}
+    words = text.value.decode(errors="replace")
+    release = re.search(r"Version (\S+?)(?:-Product|\s|$)", words)
+    processor = (v.processor or b"").decode(errors="replace")
+    isa = re.search(r"\(Intel\(R\) ([A-Z][\w.-]*)\)", processor)
+    return {"version": release.group(1) if release else words or None, "build": (v.build or b"").decode() or None,
+            "code_path": isa.group(1) if isa else processor or None}
 
 
 def threaded() -> bool:
@@ -130,7 +162,7 @@ class PardisoLDL:
     """Cholesky factorizations by PARDISO of symmetric matrices of one sparsity
     pattern (CSC ``indptr``, ``indices``, n x n, both triangles): the analysis
     with the first, only the numbers after - the interface of the direct
-    backend's qdldl :class:`~tendon_taichi.solve.direct.LDL`. The pattern is
+    backend's qdldl :class:`~tendon_taichi.solve.cholesky.LDL`. The pattern is
     factorized in its own order, or with ``reorder`` in PARDISO's minimum degree
     order of it (module docstring). One factorization is current at a time
     (``generation`` counts them)."""
