@@ -29,13 +29,19 @@ Threads. From :data:`PARALLEL_MIN` DOFs a factorization runs on the process's
 threads (:func:`~tendon_taichi.physics.runtime.factor_threads`: its cores where it
 has them to itself - ``optimize``, ``simulate``, ``bench`` -, one in ``design``,
 whose worker processes hold the other cores, and in every worker): at level 5
-about 1.7x faster on two. Its numbers do not depend on the threads: the
-factors of t_shape's lattices at levels 2-6 solve to the same bits on one thread
-and on two (level 5 also on 3, 4 and 8), and so do those of tendon robots in
-PARDISO's own order (finger at level 5, t_shape at 4; 1-3 threads), with MKL's
-Intel OpenMP layer (its GNU layer gives other bits, even on one thread);
-``tests/test_equilibrium.py`` checks it. A PARDISO handle runs every phase on
-the threads of its analysis (on others it crashes).
+about 1.7x faster on two. Its numbers do not depend on the threads: PARDISO
+runs in its conditional numerical reproducibility mode (:data:`CNR`), in which
+the factors of t_shape's lattices at levels 3, 5 and 6 and of its tendon
+patterns in PARDISO's own order solve to the same bits on one, two and three
+threads, and whatever the mode's number. Without it they did on an AMD EPYC
+(MKL's AVX2 code), but not on an Intel Xeon (its AVX-512 code): a level-3
+lattice's solutions differed by 1e-15 between one thread and two, so that
+``optimize`` (the process's threads) and ``design`` (one) would not have made
+the same run. The mode costs nothing measurable (level 5, two threads: 7.3-8.1 ms
+a factorization, against 7.5 without). With MKL's Intel OpenMP layer (its GNU
+layer gives other bits, even on one thread); ``tests/test_equilibrium.py``
+checks it. A PARDISO handle runs every phase on the threads of its analysis (on
+others it crashes).
 """
 
 from __future__ import annotations
@@ -64,6 +70,10 @@ MKL_THREADING_INTEL, MKL_THREADING_SEQUENTIAL = 0, 1
 #: 27-28: the second thread's waits cost the kernels around it), at level 2 not
 #: even the factorization (0.62 against 0.57 ms)
 PARALLEL_MIN = 4000
+
+#: ``iparm[33]``: PARDISO's conditional numerical reproducibility mode (CNR) on, the same bits on
+#: any number of threads (module docstring); any value above 0 gave the same bits and speed
+CNR = 1
 
 
 def _load():
@@ -182,6 +192,7 @@ class PardisoLDL:
         self._iparm[[0, 9, 34]] = (1, 13, 1)
         self._iparm[4] = 0 if reorder else 1
         self._iparm[17] = -1  # report the factor's entries (:attr:`entries`)
+        self._iparm[33] = CNR
         self._perm = np.arange(n, dtype=np.int32)
         self._data = np.zeros(len(self.ja))
         self._analyzed = False  # phase 11 done (and its memory to release)
