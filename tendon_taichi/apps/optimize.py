@@ -17,7 +17,7 @@ from ..files import check_writable, file_stem
 from ..io.export import pose_arrays, write_export
 from ..io.plots import plot_stages
 from ..io.progress import Progress, active
-from ..io.recording import Recorder, RecordingError, completed_chunks, read_recording
+from ..io.recording import RecordedRun, Recorder, RecordingError, completed_chunks, read_recording
 from ..objective.settings import settings_dict
 from ..optimizer.homotopy import RunCallbacks, StageResult, run_schedule
 from ..optimizer.soft_ik import Figures, Iterate, SoftIK, active_set
@@ -191,7 +191,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
     return RunResult(problem, stages, summary, record, export, warnings)
 
 
-def _check_resumable(run, level: int | None, solver: str | None, scene: Scene | None) -> None:
+def _check_resumable(run: RecordedRun, level: int | None, solver: str | None, scene: Scene | None) -> None:
     """Refuse a resolution, linear solver or scene that differs from the recorded
     run's (a scene: its name or its TOML text)."""
     meta = run.meta

@@ -295,7 +295,8 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
              for case in suite]
     by_name = {c.name: c for c in suite}
     result = {"suite": str(directory), "level": level, "settings": overrides, "consolidation": cons,
-              "tendons": tendons, "front_search": search, "provenance": {**provenance(), "cholesky": cholesky_library()}, "cases": []}
+              "tendons": tendons, "front_search": search,
+              "provenance": {**provenance(), "cholesky": cholesky_library()}, "cases": []}
     done = {}
 
     def on_outcome(o) -> None:

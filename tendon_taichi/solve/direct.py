@@ -39,8 +39,8 @@ from ..errors import ConvergenceError
 from ..physics.capstan import perp
 from ..physics.model import Model
 from ._newton_kernels import direction_from
-from .linear import LinearSolver, LinearStats
 from .cholesky import LDL, cholesky_class
+from .linear import LinearSolver, LinearStats
 from .pardiso import PardisoLDL
 
 

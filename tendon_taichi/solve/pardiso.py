@@ -35,7 +35,7 @@ the factors of t_shape's lattices at levels 3, 5 and 6 and of its tendon
 patterns in PARDISO's own order solve to the same bits on one, two and three
 threads, and whatever the mode's number. Without it they did on an AMD EPYC
 (MKL's AVX2 code), but not on an Intel Xeon (its AVX-512 code): a level-3
-lattice's solutions differed by 1e-15 between one thread and two, so that
+lattice's solutions differed by about 1e-15 between one thread and two, so that
 ``optimize`` (the process's threads) and ``design`` (one) would not have made
 the same run. The mode costs nothing measurable (level 5, two threads: 7.3-8.1 ms
 a factorization, against 7.5 without). With MKL's Intel OpenMP layer (its GNU
