@@ -180,6 +180,9 @@ def resume_and_truncated(b: Bench, run: Path):
     rec = Path(shutil.copyfile(run, d / "run.rrd"))
     r = b.cli("optimize", "--resume", rec, "--resolution", 2, cwd=d)
     b.row("6. `--resume` with another `--resolution`", "`optimize --resume R --resolution 2`", r, files(d))
+    other = "finger" if read_recording(rec).meta["scene"] != "finger" else "t_shape"
+    r = b.cli("optimize", other, "--resume", rec, cwd=d)
+    b.row("6. `--resume` with another scene", f"`optimize {other} --resume R`", r, files(d))
     torn = d / "torn.rrd"
     data = run.read_bytes()
     torn.write_bytes(data[: int(len(data) * 0.8)])
