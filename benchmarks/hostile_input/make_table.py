@@ -137,14 +137,35 @@ def waypoints_outside(b: Bench, run: Path):
           r, "nothing new")
 
 
+def unprivileged(b: Bench) -> tuple[list[str], str | None]:
+    """The command prefix that runs as an unprivileged user (uid 65534) where this
+    script runs as root, which the permission cases need (root reads and writes
+    anything), and why that user cannot run this Python and the package (None
+    where it can): a home folder that only root may enter, for one."""
+    if os.geteuid() != 0:
+        return [], None
+    as_user = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
+    r = subprocess.run([*as_user, sys.executable, "-c", "import tendon_taichi"], env=b.env, capture_output=True,
+                       text=True, cwd="/")
+    if r.returncode == 0:
+        return as_user, None
+    why = (r.stderr.strip().splitlines() or [f"exit {r.returncode}"])[-1]
+    return as_user, f"not run: uid 65534 cannot run {sys.executable} ({why})"
+
+
 def read_only_folder(b: Bench, run: Path):
     d = b.folder("ro")
     rec = Path(shutil.copyfile(run, d / "run.rrd"))
     before = rec.read_bytes()
+    as_user, cannot = unprivileged(b)
+    if cannot:
+        for extra in ("", " --record"):
+            b.row(f"5. `compare` in a read-only folder{' with --record' if extra else ''}", f"`compare R{extra}`",
+                  "-", files(d), said=cannot)
+        return
     os.chmod(d, 0o555)
     os.chmod(b.work, 0o755)  # the scratch folder is private: let the unprivileged user in
     try:
-        as_user = [] if os.geteuid() != 0 else ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
         for extra in ((), ("--record",)):
             cmd = [*as_user, sys.executable, "-m", "tendon_taichi", "compare", str(rec), *QUICK, "strands",
                    *extra]
@@ -164,7 +185,11 @@ def unreadable(b: Bench, run: Path):
     d = b.folder("unreadable")
     rec = Path(shutil.copyfile(run, d / "run.rrd"))
     os.chmod(rec, 0o000)
-    as_user = [] if os.geteuid() != 0 else ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
+    as_user, cannot = unprivileged(b)
+    if cannot:
+        os.chmod(rec, 0o644)
+        b.row("5. a recording the user may not read", "`replay R` (mode 000)", "-", files(d), said=cannot)
+        return
     os.chmod(b.work, 0o755)
     try:
         r = subprocess.run([*as_user, sys.executable, "-m", "tendon_taichi", "replay", str(rec)], env=b.env,
