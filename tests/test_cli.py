@@ -225,3 +225,25 @@ def test_a_kernel_cache_that_cannot_be_written_is_a_warning_not_a_crash(tmp_path
     assert len(err) == 1 and err[0].startswith("tendon-taichi: warning: Taichi's kernel cache")
     monkeypatch.setenv("TI_OFFLINE_CACHE_FILE_PATH", str(tmp_path / "cache"))
     assert runtime._kernel_cache(ti) == {"offline_cache": True} and capsys.readouterr().err == ""
+
+
+def test_a_stale_kernel_cache_lock_is_removed_and_a_fresh_one_kept(tmp_path, monkeypatch):
+    """A run killed while Taichi held its cache's lock leaves the lock file; every
+    later process would then fail to lock the cache and compile all its kernels
+    again. One older than STALE_LOCK_S is removed; a fresh one (another process
+    reading the cache now) is left alone."""
+    import os
+    import time
+
+    import taichi as ti
+
+    from tendon_taichi.physics import runtime
+
+    monkeypatch.setenv("TI_OFFLINE_CACHE_FILE_PATH", str(tmp_path))
+    lock = tmp_path / "ticache.lock"
+    lock.write_text("")
+    old = time.time() - runtime.STALE_LOCK_S - 5
+    os.utime(lock, (old, old))
+    assert runtime._kernel_cache(ti) == {"offline_cache": True} and not lock.exists()
+    lock.write_text("")
+    assert runtime._kernel_cache(ti) == {"offline_cache": True} and lock.exists()

@@ -150,16 +150,38 @@ def _plain_source_positions() -> None:
     ASTTransformerContext.get_pos_info = plain
 
 
+#: s after which Taichi's kernel-cache lock file is stale: Taichi holds it while it reads or writes
+#: the cache (well under a second) and removes it after; a process killed meanwhile leaves it, and
+#: then every later process fails to take it (three warnings), skips the cache and compiles every
+#: kernel again (5-6 s a process on 2 cores, each worker included)
+STALE_LOCK_S = 60.0
+
+
+def _clear_stale_lock(path: Path) -> None:
+    """Remove the kernel cache ``path``'s lock file when it is older than
+    :data:`STALE_LOCK_S` (and still the same file)."""
+    lock = path / "ticache.lock"
+    try:
+        st = lock.stat()
+        if time.time() - st.st_mtime > STALE_LOCK_S:
+            again = lock.stat()
+            if (again.st_ino, again.st_mtime_ns) == (st.st_ino, st.st_mtime_ns):
+                lock.unlink()
+    except OSError:
+        pass
+
+
 def _kernel_cache(ti) -> dict:
     """Taichi's compiled-kernel cache settings: its usual folder when it can be
-    written; otherwise (a home folder that is not the user's, a read-only one),
-    where Taichi would abort the process, a temporary folder removed at exit, and a
-    warning."""
+    written (a stale lock in it removed, :func:`_clear_stale_lock`); otherwise (a
+    home folder that is not the user's, a read-only one), where Taichi would abort
+    the process, a temporary folder removed at exit, and a warning."""
     path = Path(os.environ.get("TI_OFFLINE_CACHE_FILE_PATH") or ti.lang.impl.default_cfg().offline_cache_file_path)
     try:
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=path):
             pass
+        _clear_stale_lock(path)
         if all(os.access(f, os.R_OK | os.W_OK) for f in path.glob("ticache.*")):
             return {"offline_cache": True}
     except OSError:
