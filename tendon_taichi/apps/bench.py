@@ -35,15 +35,14 @@ from ..io.progress import Progress
 from ..objective.term import State
 from ..optimizer.soft_ik import ADJOINT_TOL, SoftIK
 from ..physics import runtime
-from ..solve.cholesky import cholesky_library
 from ..solve.linear import resolve_solver
 from ..solve.newton import NewtonSolver
 from ..solve.pardiso import available as pardiso_available
 from ..solve.pardiso import threaded as pardiso_threaded
 from ..tasks.engine import Task, case_id, run_tasks
-from ..version import provenance
 from .baseline import BaselineGradient
 from .case import STOP, run_case, worker_setup
+from .provenance import result_provenance
 
 #: seconds-valued figures, in the order of the table and the plot
 TIMINGS = ("equilibrium_cold_s", "equilibrium_warm_s", "adjoint_s", "gradient_s", "forward_sensitivity_s",
@@ -280,8 +279,7 @@ def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int =
     # each backend's first solve in the process included compiling its kernels
     comp = sum(f["first_solve_s"] - f["equilibrium_cold_s"]["median"] for f in rows[0]["solvers"].values())
     result = {"scene": scene.name, "machine": machine(), "compile_s": comp, "repeat": repeat, "levels": rows,
-              "exponents": exponents(rows), "optimize_engine": report.engine,
-              "provenance": {**provenance(), "cholesky": cholesky_library()}}
+              "exponents": exponents(rows), "optimize_engine": report.engine, "provenance": result_provenance()}
     write_outputs(result, out_dir)
     if report.interrupted:
         raise Stopped(f"interrupted during the optimizations; {len(report.outcomes)} of {len(jobs)} finished "

@@ -38,12 +38,11 @@ from ..io.plots import plot_design, plot_front
 from ..io.progress import Progress
 from ..io.recording import rewrite
 from ..physics import runtime
-from ..solve.cholesky import cholesky_library
 from ..tasks.pool import Pool
-from ..version import provenance
 from .extract import Extraction, extract, frictionless_error, log_layout
 from .optimize import RunResult, optimize
 from .priors import PriorDesign, prior_layouts, read_prior, route_rows
+from .provenance import result_provenance
 
 #: what the output folder holds
 FILES = ("run.rrd", "run.npz", "as_built.npz", "design.json", "design.svg", "design.png", "front.png")
@@ -312,7 +311,7 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], bud
                             **({"error": r.error} if r.error else {})} for r in ex.results],
             "timing": {"optimize_s": None, "extract_s": None, "route_s": sum(c.route_s for c in done),
                        "route_evaluations": sum(c.route_evaluations for c in done)},
-            "provenance": {**provenance(), "cholesky": cholesky_library()}}
+            "provenance": result_provenance()}
 
 
 def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool) -> dict:

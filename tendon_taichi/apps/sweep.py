@@ -34,12 +34,11 @@ from ..extract.settings import BUDGET, FRONT_DEFAULTS, ConsolidationSettings, fr
 from ..files import atomic_path, write_json
 from ..io.plots import plot_sweep
 from ..io.progress import Progress
-from ..solve.cholesky import cholesky_library
 from ..solve.linear import SOLVERS
 from ..tasks.engine import Task, case_id, run_tasks
-from ..version import provenance
 from .case import STOP, worker_setup
 from .case import run_case as run_one
+from .provenance import result_provenance
 
 SWEEP_KEYS = ("name", "scenes", "levels", "extractors", "solver", "grid", "set", "consolidation", "front")
 #: grid and set keys that are [tendons] settings (the others are [optimize] ones)
@@ -279,8 +278,7 @@ def run(sweep: Sweep | str | Path, out_dir: str | Path, workers: int | None = No
               "solver": sw.solver, "grid": sw.grid, "set": sw.fixed, "consolidation": sw.consolidation,
               "front": sw.front, "cases": rows,
               "failed": sum("error" in r for r in rows), "reused": sum(r["reused"] for r in rows),
-              "interrupted": report.interrupted, "engine": report.engine,
-              "provenance": {**provenance(), "cholesky": cholesky_library()},
+              "interrupted": report.interrupted, "engine": report.engine, "provenance": result_provenance(),
               "time_s": time.perf_counter() - t0}
     write_outputs(result, out)
     if report.interrupted:

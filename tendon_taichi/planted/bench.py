@@ -33,6 +33,7 @@ import numpy as np
 
 from ..apps.case import STOP, worker_setup
 from ..apps.case import run_case as run_one
+from ..apps.provenance import result_provenance
 from ..body.problem import Problem
 from ..body.scene import load_scene, with_overrides
 from ..errors import ConvergenceError, InputError, Stopped
@@ -43,9 +44,7 @@ from ..extract.realizable import solve_realizable_poses
 from ..extract.settings import FRONT_DEFAULTS, front_id
 from ..files import atomic_path, file_stem, write_json
 from ..io.progress import Progress
-from ..solve.cholesky import cholesky_library
 from ..tasks.engine import Task, case_id, run_tasks
-from ..version import provenance
 from .gallery import plot_gallery
 
 #: pass criteria (the issue's "how it is shown")
@@ -295,8 +294,7 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
              for case in suite]
     by_name = {c.name: c for c in suite}
     result = {"suite": str(directory), "level": level, "settings": overrides, "consolidation": cons,
-              "tendons": tendons, "front_search": search,
-              "provenance": {**provenance(), "cholesky": cholesky_library()}, "cases": []}
+              "tendons": tendons, "front_search": search, "provenance": result_provenance(), "cases": []}
     done = {}
 
     def on_outcome(o) -> None:
