@@ -57,6 +57,7 @@ def test_design_writes_every_output_and_nothing_else(designed):
     assert sorted(p.name for p in (d / "out").iterdir()) == sorted(
         ["run.rrd", "run.npz", "as_built.npz", "design.json", "design.svg", "design.png", "front.png"])
     assert sorted(p.name for p in d.iterdir()) == ["finger.toml", "out", "out.json"]
+    assert "worker process stopped" not in r.stderr  # its warm-up (a short design) ran through
     summary = json.loads((d / "out" / "design.json").read_text())
     assert summary == json.loads((d / "out.json").read_text())
     assert summary["provenance"]["cholesky"] == cholesky_library()  # what made the design's numbers
@@ -251,6 +252,30 @@ def test_bad_values_give_one_line_and_write_nothing(cli, tmp_path, args, message
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("tendon-taichi: error: ") and message in lines[0], r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("goal, budget_hint", [("[0.30, 0.30]", None), ("[0.10, 0.008]", "a --budget of ")])
+def test_goals_out_of_reach_stop_before_extraction_and_keep_the_run(cli, tmp_path, goal, budget_hint):
+    """Goals the optimized fibers miss by more than the budget (one 4 L away; one
+    a stretch the contracting fibers cannot make) end the design after the
+    optimization with one line: no layout is searched, the run is kept, and the
+    budget that designs anyway is named where there is one below 1."""
+    (tmp_path / "s.toml").write_text(SCENE.replace("goal = [0.066, 0.02]", f"goal = {goal}"))
+    r = cli("design", "s.toml", "--out", "out", "--quiet", "--stage-iterations", "10", "--k-min", "0.4",
+            cwd=tmp_path)
+    assert r.returncode == 2 and r.stdout == ""
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("tendon-taichi: error: the goals are out of reach: "), r.stderr
+    error = float(re.search(r"\(([0-9.]+)% of L\), above the budget of 0.5% of L", lines[0]).group(1)) / 100
+    assert error > 0.005 and "the run is kept in out/run.rrd" in lines[0]
+    if budget_hint is None:
+        assert error > 1.0 and "--budget" not in lines[0]
+    else:
+        enough = float(re.search(r"a --budget of ([0-9.]+) or more", lines[0]).group(1))
+        assert error <= enough <= 1.01 * error and enough < 1.0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["run.npz", "run.rrd"]
+    recorded = [st.summary["pose_error_rel"] for st in read_recording(tmp_path / "out" / "run.rrd").stages]
+    assert min(recorded) == pytest.approx(error, rel=1e-3)
 
 
 def test_bad_tendons_table_is_a_scene_error(cli, tmp_path):

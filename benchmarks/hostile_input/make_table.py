@@ -270,6 +270,12 @@ def the_rest(b: Bench, run: Path):
     b.row("10. `--option max_turn=nan`", "`extract R --extractor strands --option max_turn=nan`", r, "nothing new")
     r = b.cli("compare", run, "--friction", -1)
     b.row("10. numbers in messages", "`compare R --friction -1`", r, "nothing new")
+    d = b.folder("reach")
+    scene(d, goal="[0.02, 0.4]")
+    t0 = time.perf_counter()
+    r = b.cli("design", "s.toml", "--out", "out", cwd=d)
+    b.row("10. `design` with a goal out of reach", f"`design s.toml`, its goal 6 L away ({time.perf_counter() - t0:.0f} s)",
+          r, files(d))
     d = b.folder("timed")
     t0 = time.perf_counter()
     b.cli("compare", Path(shutil.copyfile(run, d / "run.rrd")), *QUICK, "strands", "--record", "--quiet")

@@ -147,14 +147,15 @@ def warm_up() -> float:
     at level 1 in a temporary folder; returns seconds. Its extraction skips
     consolidation: the realizable robots it solves use the same kernels, and after
     three iterations per stage the pattern is still dense, which would make
-    consolidating it take about a minute."""
+    consolidating it take about a minute, and the pose it reaches is not checked
+    against a budget (:func:`check_reach`)."""
     from ..body.scene import load_scene, with_overrides
 
     t0 = time.perf_counter()
     scene = with_overrides(load_scene("t_shape"), {"stage_iterations": 3, "k_min": 0.5})
     with tempfile.TemporaryDirectory(prefix="tendon-taichi-warmup-") as tmp:
-        design(scene, 1, tmp, consolidation=ConsolidationSettings(tolerance=-1.0, refine=0), png=False,
-               converge=False)
+        design(scene, 1, tmp, budget=1.0, consolidation=ConsolidationSettings(tolerance=-1.0, refine=0),
+               png=False, converge=False)
     return time.perf_counter() - t0
 
 
@@ -176,7 +177,8 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     same body (its folder or ``design.json``, checked before anything is computed),
     whose front's layouts the front searches from too (:mod:`.priors`);
     ``min_capstan``, the least worst capstan factor the recommendation accepts
-    (:func:`recommend`)."""
+    (:func:`recommend`). Goals out of reach of the budget end it after the
+    optimization (:func:`check_reach`)."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     prior = None if routes_from is None else read_prior(routes_from, scene)
@@ -188,6 +190,7 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
         progress.message(f"design: optimizing {scene.name} at level {level}"
                          + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
         run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
+        check_reach(run, budget)
         ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
                                           plugin_timeout, beam, converge, pool, prior, min_capstan)
     if pool.broken:
@@ -199,6 +202,32 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     summary["time_s"] = time.perf_counter() - t0
     write_json(summary, out / "design.json")
     return Design(summary, run, ex, layout)
+
+
+def check_reach(run: RunResult, budget: float) -> None:
+    """Stop before anything is extracted where the goals are out of reach of the
+    budget: the optimized fibers come no closer to them than ``budget`` (fraction
+    of L) at any stage, stage 0 (every fiber free, no regularizer) included. No
+    tendon layout is expected to beat every fiber together, and the search for
+    one over the many tendons such fibers make takes many minutes; the run stays
+    in its recording, and the message names the budget that designs anyway."""
+    best = min(run.stages, key=lambda st: st.figures.pose_error_rel).figures
+    if best.pose_error_rel <= budget:
+        return
+    enough = _rounded_up(best.pose_error_rel)
+    way_on = f"; a --budget of {enough:g} or more designs anyway" if enough < 1.0 else ""
+    raise InputError(f"the goals are out of reach: the optimized fibers come no closer to them than "
+                     f"{1e3 * best.pose_error:.2f} mm ({100 * best.pose_error_rel:.2f}% of L), above the budget of "
+                     f"{100 * budget:g}% of L, so no layout was searched; the run is kept in "
+                     f"{run.recording}{way_on}")
+
+
+def _rounded_up(x: float) -> float:
+    """``x`` > 0 rounded up to three significant digits."""
+    r = float(f"{x:.3g}")
+    if r < x:
+        r = float(f"{r + 10.0 ** (np.floor(np.log10(r)) - 2):.3g}")
+    return r
 
 
 def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int | None = None,
