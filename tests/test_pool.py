@@ -5,8 +5,13 @@ the results complete (run here) and says so; an error a task raises reaches
 the caller; with no workers nothing is started."""
 
 import os
+import signal
+import subprocess
+import sys
 import threading
+import time
 from functools import partial
+from pathlib import Path
 
 import pytest
 
@@ -27,6 +32,33 @@ def fail(x: int) -> int:
     if x == 2:
         raise ValueError("two is bad")
     return x
+
+
+def sleep_in_a_worker(folder: str) -> None:
+    """Say which process took the item (a file named by its pid), then take long."""
+    (Path(folder) / f"{os.getpid()}.pid").write_text("")
+    time.sleep(120)
+
+
+#: a job whose pool's worker and own process each take one long item
+PARENT = """
+import sys
+sys.path.insert(0, {tests!r})
+from tendon_taichi.tasks.pool import Pool
+from test_pool import sleep_in_a_worker
+
+if __name__ == "__main__":
+    with Pool(1) as pool:
+        pool.map(sleep_in_a_worker, [{folder!r}] * 2)
+"""
+
+
+def running(pid: int) -> bool:
+    """Whether process ``pid`` exists and has not ended (a zombie has)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
 
 
 def broken_setup() -> None:
@@ -97,3 +129,23 @@ def test_what_the_workers_get_is_pickled_in_the_calling_thread():
     with Pool(1) as pool:
         assert pool.map(partial(both_traced, Traced()), [Traced() for _ in range(6)]) == [True] * 6
     assert len(PICKLED_IN) >= 2 and set(PICKLED_IN) == {threading.current_thread().name}
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process states from /proc")
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_a_worker_ends_when_the_job_that_started_it_is_killed(tmp_path, sig):
+    """A job killed from outside (a batch scheduler's SIGTERM, SIGKILL) runs no
+    clean-up; its worker must not go on computing for no one."""
+    (tmp_path / "job.py").write_text(PARENT.format(tests=str(Path(__file__).parent), folder=str(tmp_path)))
+    job = subprocess.Popen([sys.executable, str(tmp_path / "job.py")], stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while len(list(tmp_path.glob("*.pid"))) < 2 and time.monotonic() < deadline:  # both took their item
+        time.sleep(0.1)
+    workers = [int(f.stem) for f in tmp_path.glob("*.pid") if int(f.stem) != job.pid]
+    assert len(workers) == 1 and running(workers[0])
+    job.send_signal(sig)
+    job.wait(timeout=30)
+    deadline = time.monotonic() + 20
+    while running(workers[0]) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not running(workers[0])

@@ -20,7 +20,8 @@ process killed, out of memory) or a ``setup`` that fails (the worker then ends
 quietly) breaks the pool: the items it had are run again here and the pool
 runs everything here from then on (``broken`` says why). An exception ``fn``
 raises in a worker is raised here, as it would be in-process. Workers ignore
-Ctrl-C: the process that runs the job stops them.
+Ctrl-C: the process that runs the job stops them. A worker whose job process
+is gone (killed, so that it stopped nobody) ends at once.
 
 Spawned workers import the main module again: a script that makes a pool (or
 calls ``design`` with workers) does so under ``if __name__ == "__main__":``.
@@ -29,6 +30,7 @@ calls ``design`` with workers) does so under ``if __name__ == "__main__":``.
 from __future__ import annotations
 
 import multiprocessing
+import multiprocessing.connection
 import os
 import pickle
 import signal
@@ -50,14 +52,33 @@ def _ready() -> bool:
 
 def _start(setup: Callable[..., Any] | None, args: tuple) -> None:
     """A worker's start: Ctrl-C is for the process that runs the job (it stops the
-    workers), then ``setup``; a set-up that fails ends the worker quietly (the
-    pool breaks, and the job goes on in its own process)."""
+    workers), the worker ends with that process (:func:`_end_with_parent`), then
+    ``setup``; a set-up that fails ends the worker quietly (the pool breaks, and
+    the job goes on in its own process)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _end_with_parent()
     try:
         if setup is not None:
             setup(*args)
     except BaseException:  # noqa: BLE001 - reported by the pool as broken, not as a traceback here
         os._exit(1)
+
+
+def _end_with_parent() -> None:
+    """End this worker as soon as the process that started it is gone: one killed
+    (SIGTERM from ``timeout`` or a batch scheduler, SIGKILL, out of memory) stops
+    no workers, and a worker would otherwise compute its task to the end - many
+    minutes of a front search - for no one. A daemon thread waits on the parent's
+    sentinel, which becomes ready when the parent process ends."""
+    parent = multiprocessing.parent_process()
+    if parent is None:
+        return
+
+    def wait() -> None:
+        multiprocessing.connection.wait([parent.sentinel])
+        os._exit(1)
+
+    threading.Thread(target=wait, name="end-with-parent", daemon=True).start()
 
 
 class Pool:
