@@ -7,7 +7,7 @@ Each case runs the real command line in a scratch folder (removed at the end):
 malformed scenes, damaged and truncated recordings, two writers at once, kills,
 read-only folders, plugins that break the rules (the test suite's demo plugin,
 installed into the scratch folder). The table gives the exit status, the line
-the user reads, and what the case left on disk. About 5 minutes on 2 cores.
+the user reads, and what the case left on disk. About 6 minutes on 2 cores.
 """
 
 from __future__ import annotations
@@ -294,6 +294,46 @@ def the_rest(b: Bench, run: Path):
     b.row("10. `compare --record` killed (SIGKILL)",
           f"`compare R --record` (a whole run: {duration:.1f} s), killed after 40-100 % of that", "-9",
           "; ".join(left), said="(killed)")
+    design_killed(b)
+
+
+def children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.append(int(stat.parent.name))
+    return out
+
+
+def running(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def design_killed(b: Bench):
+    """``design`` with a worker process, killed from outside (as ``timeout`` or a
+    batch scheduler does) while both compute: are its processes gone after it?"""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        d = b.folder(f"design-{sig.name}")
+        p = b.start("design", "t_shape", "--out", "out", "--workers", 1, "--quiet", cwd=d)
+        time.sleep(40)  # past the optimization (about 10 s): the extractors' consolidations, shared
+        workers = [c for c in children(p.pid) if "resource_tracker" not in Path(f"/proc/{c}/cmdline").read_text()]
+        p.send_signal(sig)
+        p.wait()
+        time.sleep(5)
+        left = [w for w in workers if running(w)]
+        for w in left:
+            os.kill(w, signal.SIGKILL)
+        b.row(f"10. `design` killed ({sig.name}) while its worker computes",
+              "`design t_shape --workers 1`, killed after 40 s", str(p.returncode), files(d),
+              said=f"(killed); {len(workers)} worker process(es) then, {len(left)} still running 5 s later")
 
 
 def made_at(p: dict) -> str:
@@ -335,7 +375,8 @@ def main(argv=None) -> int:
         "Every case of the hostile-input issue, run against the command line by\n"
         "`python benchmarks/hostile_input/make_table.py` in a scratch folder (`WORK`).\n"
         "Exit statuses: 0 done, 2 bad input or a file that could not be written, 4 an\n"
-        "extractor failed (the others' results are printed), -9 killed by the script.\n\n"
+        "extractor failed (the others' results are printed), -9 and -15 killed by the script\n"
+        "(SIGKILL, SIGTERM).\n\n"
         + text + "\n\n" + made_at(provenance()) + "\n")
     print(args.out)
     return 0
