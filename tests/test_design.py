@@ -278,6 +278,25 @@ def test_goals_out_of_reach_stop_before_extraction_and_keep_the_run(cli, tmp_pat
     assert min(recorded) == pytest.approx(error, rel=1e-3)
 
 
+def test_the_optimizations_warnings_come_before_the_search(cli, tmp_path):
+    """A warning of the optimization (here: a sparsity weight so high that the
+    regularizers give up the pose) is said as soon as it is known, before the
+    search that may take long, and again with the design's result."""
+    from tendon_taichi import load_scene
+
+    (tmp_path / "s.toml").write_text(load_scene("finger").source.replace("goal = [0.0939, 0.0345]",
+                                                                         "goal = [0.06, 0.05]"))
+    r = cli("design", "s.toml", "--out", "out", "--stage-iterations", "10", "--k-min", "0.4", "--sparsity", "0.1",
+            "--extractors", "strands", "--beam", "1", "--no-converge", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    said = "the regularizers gave up the pose"
+    early = next(i for i, ln in enumerate(lines) if ln.startswith("design: warning: ") and said in ln)
+    assert early < next(i for i, ln in enumerate(lines) if ln.startswith("design: strands: extracting"))
+    assert any(ln.startswith("tendon-taichi: warning: ") and said in ln for ln in lines[early + 1:])
+    assert any(said in w for w in json.loads((tmp_path / "out" / "design.json").read_text())["warnings"])
+
+
 def test_bad_tendons_table_is_a_scene_error(cli, tmp_path):
     (tmp_path / "s.toml").write_text(SCENE.replace("friction = 0.15", "friction = 3.0"))
     r = cli("design", "s.toml", "--out", "out", cwd=tmp_path)

@@ -191,6 +191,8 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
                          + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
         run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
         check_reach(run, budget)
+        for w in run.warnings:  # now, not only with the design: the search may take long
+            progress.message(f"design: warning: {w}")
         ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
                                           plugin_timeout, beam, converge, pool, prior, min_capstan)
     if pool.broken:
