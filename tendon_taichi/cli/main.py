@@ -4,7 +4,9 @@ one place where errors become exit statuses.
 Results go to stdout (``--json`` for machines, to stdout or a file), progress
 and warnings to stderr. Bad input gives one ``tendon-taichi: error: ...`` line
 and exit status 2; an unexpected failure one ``internal error`` line and 1
-(``--debug`` shows the traceback); Ctrl-C exits 130; a reader of stdout that
+(``--debug`` shows the traceback); Ctrl-C exits 130, and SIGTERM (``timeout``,
+a batch scheduler) stops the command the same way, keeping what Ctrl-C keeps,
+with 143; a reader of stdout that
 stops early (``tendon-taichi scenes --json | head``) ends the command quietly
 with 141, as SIGPIPE ends other tools (the files it wrote stay).
 """
@@ -14,7 +16,9 @@ from __future__ import annotations
 import argparse
 import os
 import select
+import signal
 import sys
+import threading
 
 from ..errors import InputError, Stopped, TendonError
 from ..physics import runtime
@@ -24,6 +28,37 @@ from .common import PROG, Parser, check_before_work
 
 #: the exit status when stdout's reader went away (128 + SIGPIPE, as a shell reports it)
 BROKEN_PIPE = 141
+#: the exit statuses of a command stopped by Ctrl-C and by SIGTERM (128 + the signal)
+INTERRUPTED, TERMINATED = 130, 143
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Ctrl-C's KeyboardInterrupt would be: what stops a run
+    on Ctrl-C (recordings closed, completed stages kept, workers stopped) stops it
+    here too."""
+
+
+#: whether this command received SIGTERM (its exit status is then TERMINATED)
+_sigterm = [False]
+
+
+def _terminate(signum, frame):
+    _sigterm[0] = True
+    raise _Terminated
+
+
+def _on_sigterm():
+    """Stop on SIGTERM as on Ctrl-C, from the main thread only (where Python runs
+    signal handlers); returns the handler to put back."""
+    _sigterm[0] = False
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _terminate)
+
+
+def _stopped() -> int:
+    """The exit status of a command stopped from outside."""
+    return TERMINATED if _sigterm[0] else INTERRUPTED
 
 
 def _stdout_reader_gone() -> bool:
@@ -70,6 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     debug = "--debug" in argv or os.environ.get("TENDON_TAICHI_DEBUG") == "1"
+    previous = _on_sigterm()
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
@@ -89,12 +125,12 @@ def main(argv: list[str] | None = None) -> int:
     except TendonError as exc:
         if isinstance(exc, Stopped):
             print(f"{PROG}: {exc}", file=sys.stderr)
-            return 130
+            return _stopped()
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
-        return 130
+        print(f"{PROG}: {'terminated' if _sigterm[0] else 'interrupted'}", file=sys.stderr)
+        return _stopped()
     except BrokenPipeError as exc:
         if not _stdout_reader_gone():
             return _internal_error(exc, debug)
@@ -104,6 +140,9 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0)
     except Exception as exc:  # noqa: BLE001 - the one place that turns bugs into one line
         return _internal_error(exc, debug)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":
