@@ -297,6 +297,21 @@ def test_the_optimizations_warnings_come_before_the_search(cli, tmp_path):
     assert any(said in w for w in json.loads((tmp_path / "out" / "design.json").read_text())["warnings"])
 
 
+def test_a_pattern_too_sparse_for_a_tendon_is_said_with_what_it_keeps(cli, tmp_path):
+    """A sparsity weight that leaves one active fiber: no layout, and the one line
+    says what the stage the extractors read keeps."""
+    (tmp_path / "s.toml").write_text(SCENE)
+    r = cli("design", "s.toml", "--out", "out", "--quiet", "--stage-iterations", "25", "--k-min", "0.4",
+            "--sparsity", "0.1", "--extractors", "strands", "--beam", "1", "--no-converge", cwd=tmp_path)
+    assert r.returncode == 2 and r.stdout == ""
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("tendon-taichi: error: no extractor's tendons make a layout"), \
+        r.stderr
+    last = read_recording(tmp_path / "out" / "run.rrd").stages[-1].summary
+    said = re.search(r"stage (\d+), which they read, keeps (\d+) active fiber\(s\)", lines[0])
+    assert said and int(said.group(1)) == last["stage"] and int(said.group(2)) == last["active_fibers"] <= 2
+
+
 def test_bad_tendons_table_is_a_scene_error(cli, tmp_path):
     (tmp_path / "s.toml").write_text(SCENE.replace("friction = 0.15", "friction = 3.0"))
     r = cli("design", "s.toml", "--out", "out", cwd=tmp_path)

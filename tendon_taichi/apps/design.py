@@ -268,7 +268,7 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
                          priors)
     if not front.layouts:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)" if max_tendons
-                         else "no extractor's tendons make a layout of one tendon or more")
+                         else "no extractor's tendons make a layout of one tendon or more" + _pattern_said(ex))
     fine = finer_mesh_errors(ex, front, cons, solver, log, workers) if converge else None
     rows = front_rows(front, fine, ms.mu, ms.kink_angle)
     chosen = recommend(rows, budget, max_tendons, min_capstan)
@@ -281,6 +281,16 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
                              converge_s=None if fine is None else fine["time_s"],
                              route_s=summary["timing"]["route_s"] + front.route_s)
     return ex, layout, summary
+
+
+def _pattern_said(ex: Extraction) -> str:
+    """What the extracted stage's tension pattern holds, for a message about its tendons."""
+    st = next((st.summary for st in ex.run.stages if st.summary.get("stage") == ex.stage), None)
+    if st is None or "active_fibers" not in st:
+        return ""
+    return (f": stage {ex.stage}, which they read, keeps {st['active_fibers']} active fiber(s) "
+            f"({100 * st['active_length']:.1f} cm) at a pose error of {100 * st['pose_error_rel']:.2f}% of L "
+            f"(the regularizers' weights, --sparsity first, set how much stays)")
 
 
 def _budget_warning(summary: dict) -> list[str]:
