@@ -256,7 +256,7 @@ def test_bad_values_give_one_line_and_write_nothing(cli, tmp_path, args, message
 
 @pytest.mark.parametrize("goal, budget_hint", [("[0.30, 0.30]", None), ("[0.10, 0.008]", "a --budget of ")])
 def test_goals_out_of_reach_stop_before_extraction_and_keep_the_run(cli, tmp_path, goal, budget_hint):
-    """Goals the optimized fibers miss by more than the budget (one 4 L away; one
+    """Goals the optimized fibers miss by more than the budget (one 5 L away; one
     a stretch the contracting fibers cannot make) end the design after the
     optimization with one line: no layout is searched, the run is kept, and the
     budget that designs anyway is named where there is one below 1."""
