@@ -285,8 +285,8 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
 
 def _pattern_said(ex: Extraction) -> str:
     """What the extracted stage's tension pattern holds, for a message about its tendons."""
-    st = next((st.summary for st in ex.run.stages if st.summary.get("stage") == ex.stage), None)
-    if st is None or "active_fibers" not in st:
+    st = ex.run.stages[ex.stage].summary  # the completed stages, from 0 up
+    if "active_fibers" not in st:
         return ""
     return (f": stage {ex.stage}, which they read, keeps {st['active_fibers']} active fiber(s) "
             f"({100 * st['active_length']:.1f} cm) at a pose error of {100 * st['pose_error_rel']:.2f}% of L "

@@ -32,19 +32,16 @@ BROKEN_PIPE = 141
 INTERRUPTED, TERMINATED = 130, 143
 
 
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where Ctrl-C's KeyboardInterrupt would be: what stops a run
-    on Ctrl-C (recordings closed, completed stages kept, workers stopped) stops it
-    here too."""
-
-
 #: whether this command received SIGTERM (its exit status is then TERMINATED)
 _sigterm = [False]
 
 
 def _terminate(signum, frame):
+    """SIGTERM raises Ctrl-C's KeyboardInterrupt: what stops a run on Ctrl-C
+    (recordings closed, completed stages kept, workers stopped) stops it here too;
+    the flag tells the exit status apart."""
     _sigterm[0] = True
-    raise _Terminated
+    raise KeyboardInterrupt
 
 
 def _on_sigterm():
