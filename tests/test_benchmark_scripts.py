@@ -32,7 +32,7 @@ def test_every_script_has_a_test():
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
               "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py",
-              "warm_newton.py"}
+              "warm_newton.py", "auto_solver.py"}
     assert scripts == tested
 
 
@@ -126,6 +126,16 @@ def test_simulate_levels_prints_each_level_and_solver():
     assert [r[5] for r in rows] == ["cg", "direct"] and all(r[0] == "1" for r in rows)
     assert rows[0][:5] == rows[1][:5] and int(rows[0][4]) > 0  # same problem for both backends
     assert out[-1].startswith("first solve in the process")
+
+
+def test_auto_solver_times_direct_and_cg_on_the_same_optimization():
+    out = run(BENCH / "auto_solver.py", "--levels", 1, "--iterations", 3, "--factorizations", "qdldl").stdout
+    rows = [ln.split() for ln in out.splitlines()[1:]]
+    assert [r[:4] for r in rows] == [["1", "3", "qdldl", "direct"], ["1", "3", "qdldl", "cg"]]
+    walls = [float(r[4]) for r in rows]
+    assert all(w > 0 for w in walls) and float(rows[1][8]) > 0 and len(rows[0]) == 8  # the ratio on cg's row
+    errors = [float(r[6]) for r in rows]  # one problem, two linear backends: the same optimum nearly
+    assert int(rows[0][5]) > 0 and abs(errors[0] - errors[1]) < 0.1 * errors[0]
 
 
 def test_how_it_works_draws_five_panels(tmp_path):

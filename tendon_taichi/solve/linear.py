@@ -31,11 +31,15 @@ SOLVERS = ("auto", "cg", "cg-amg", "cg-jacobi", "direct")
 
 #: ``auto`` takes the direct backend up to this many free DOFs and the
 #: factorization-preconditioned CG above. Measured on the 2-core CPU machine
-#: (t_shape), inside the optimizer: direct is 5-30 % faster at levels 1-4
-#: (714-5336 DOFs) and, with the LDL^T factorization, 1.8x faster at level 5
-#: (10504 DOFs: 328 s against 594 s for the whole optimization); at level 6
-#: (20812 DOFs) one gradient is faster with CG (0.36 s against 0.51 s).
-AUTO_DIRECT_MAX_DOFS = 15000
+#: (t_shape), inside the optimizer: direct is 5-30 % faster at levels 1-4, 1.8x at
+#: level 5 (qdldl), and with PARDISO 2.6x / 2.6x / 3.2x faster at levels 6 / 7 / 8
+#: (about 21 / 41 / 82 thousand DOFs; 15 / 5 / 3 iterations per stage: 32 s against
+#: 85, 48 against 124, 99 against 322), with qdldl 1.4x / 1.5x at levels 6 / 7
+#: (84 s against 118, 213 against 319), at about the same peak memory (CG's
+#: preconditioner is the same factorization: 566 MB against 483 at level 6, equal
+#: at 7 and 8). ``python benchmarks/auto_solver.py``; above level 8 nothing was
+#: measured.
+AUTO_DIRECT_MAX_DOFS = 100000
 
 
 def resolve_solver(name: str, dofs: int) -> str:
