@@ -416,3 +416,56 @@ def test_a_tendon_robots_sparse_hessian_holds_every_entry_once():
     assert abs(got - expect).max() <= 1e-12 * abs(expect).max()
     kept = d.free[rows] & d.free[cols]
     assert d.nnz == len(np.unique(rows[kept] * n + cols[kept]))
+
+
+def _lattice_and_tendon_robot():
+    """t_shape at level 1 near equilibrium: its fiber lattice, and a robot of two
+    tendons with capstan friction."""
+    from tendon_taichi.body.cables import CableSet
+
+    p = build_problem(load_scene("t_shape"), 1)
+    lattice = Model.from_problem(p)
+    NewtonSolver(lattice, "direct").solve(ac=0.02 * lattice.cables.a0, x0=p.mesh.nodes)
+    t = np.linspace(0, 1, 12)
+    paths = [np.stack([0.04 * t, 0.075 - 0.004 * np.sin(np.pi * t)], 1),
+             np.stack([0.004 * np.sin(3 * t), 0.01 + 0.05 * t], 1)]
+    robot = Model.from_problem(p, cables=CableSet.polylines(p.mesh, paths, 50.0, friction=0.3))
+    assert robot.capstan is not None
+    NewtonSolver(robot, "direct").solve(ac=0.05 * robot.cables.a0, x0=p.mesh.nodes)
+    return lattice, robot
+
+
+def test_hessian_sums_are_the_bincount_of_the_entries_to_the_bit():
+    """The direct backend's assembly sums the element and segment entries in Taichi
+    (``Model.hessian_sums``); each sum takes its terms in the entries' order, so it
+    is ``np.bincount`` of ``hessian_entries`` bit for bit - for the backend's own
+    scatter (entries on clamped DOFs into one more bin) and for a shuffled one."""
+    rng = np.random.default_rng(3)
+    for m in _lattice_and_tendon_robot():
+        d = DirectSolver(m)
+        m.prepare_hessian()
+        entries = m.hessian_entries()
+        for scatter, bins in [(d.scatter, d.nnz + 1), (rng.integers(0, 97, len(entries)).astype(np.int32), 100)]:
+            got = m.hessian_sums(scatter, bins)
+            expect = np.bincount(scatter, weights=entries, minlength=bins)
+            assert got.tobytes() == expect.tobytes()
+        assert np.any(d.scatter == d.nnz) and len(np.unique(d.scatter)) > 1000
+    with pytest.raises(ValueError, match="int32"):
+        m.hessian_sums(d.scatter.astype(np.int64), d.nnz + 1)
+    with pytest.raises(ValueError, match="a bin outside"):  # the kernel would write out of bounds
+        m.hessian_sums(d.scatter, d.nnz)
+
+
+def test_the_direct_backend_prepares_no_block_jacobi():
+    """``prepare_hessian(jacobi=False)`` (the direct backend's) makes the same element
+    tangents and cable stiffnesses and leaves the block-Jacobi preconditioner, which
+    only CG uses, as it was."""
+    for m in _lattice_and_tendon_robot():
+        names = [("D", 16 * m.m), ("KC", m.C), ("TAU", m.C)]
+        m.write("MINV", np.full(4 * m.n, 7.0))
+        m.prepare_hessian(jacobi=False)
+        without = m.read_many(names)
+        assert np.all(m.read("MINV", 4 * m.n) == 7.0)
+        m.prepare_hessian()
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(without, m.read_many(names)))
+        assert not np.any(m.read("MINV", 4 * m.n) == 7.0)

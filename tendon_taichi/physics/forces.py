@@ -32,6 +32,10 @@ from .launch import kernel
 from .layout import Scalar, Slot
 from .runtime import ti
 
+#: an element's Hessian block (its corners' x, y) and a segment's node weights
+mat6 = ti.types.matrix(6, 6, ti.f64)
+vec6 = ti.types.vector(6, ti.f64)
+
 
 # ---------------------------------------------------------------- elements
 @ti.func
@@ -218,9 +222,9 @@ def segment_stiffness(fb: ti.template(), ib: ti.template(), s) -> mat2:
 
 
 @ti.func
-def hessian(fb: ti.template(), ib: ti.template(), project: ti.i32, serial: ti.template()):
+def hessian(fb: ti.template(), ib: ti.template(), project: ti.i32, jacobi: ti.template(), serial: ti.template()):
     """Element tangents D (exact, or PSD-projected if ``project``), cable stiffnesses
-    at X, and the block-Jacobi preconditioner."""
+    at X, and (if ``jacobi``) the block-Jacobi preconditioner."""
     mu, lam = get_sc(fb, ib, Scalar.MU), get_sc(fb, ib, Scalar.LAM)
     ti.loop_config(serialize=serial)
     for e in range(ib[Slot.M]):
@@ -229,6 +233,13 @@ def hessian(fb: ti.template(), ib: ti.template(), project: ti.i32, serial: ti.te
             D = project_psd4(0.5 * (D + D.transpose()))
         set_m4(fb, ib, Slot.D, e, D)
     update_cables(fb, ib, Slot.X, serial)
+    if ti.static(jacobi):
+        block_jacobi(fb, ib, serial)
+
+
+@ti.func
+def block_jacobi(fb: ti.template(), ib: ti.template(), serial: ti.template()):
+    """MINV: per node the inverse of its 2x2 diagonal Hessian block (zero on clamped nodes)."""
     floor = get_sc(fb, ib, Scalar.FLOOR)
     ti.loop_config(serialize=serial)
     for i in range(ib[Slot.N]):
@@ -307,8 +318,8 @@ def k_gradient(fb: F64, ib: I32, g_out: ti.types.ndarray(dtype=ti.f64, ndim=1),
 
 
 @kernel
-def k_hessian(fb: F64, ib: I32, project: ti.i32, serial: ti.template()):
-    hessian(fb, ib, project, serial)
+def k_hessian(fb: F64, ib: I32, project: ti.i32, jacobi: ti.template(), serial: ti.template()):
+    hessian(fb, ib, project, jacobi, serial)
 
 
 @ti.func
@@ -322,6 +333,53 @@ def shape_gradient(B: mat2, a) -> vec2:
     return g
 
 
+@ti.func
+def element_block(fb: ti.template(), ib: ti.template(), e) -> mat6:
+    """Element e's Hessian block as last prepared, (6, 6) over its corners' x, y:
+    ``vol grad N_a . D . grad N_b`` for corners a, b."""
+    B = get_m2(fb, ib, Slot.BM, e)
+    D = get_m4(fb, ib, Slot.D, e)
+    vol = get_f(fb, ib, Slot.VOL, e)
+    out = mat6(0.0)
+    for a, b in ti.static(ti.ndrange(3, 3)):
+        ga, gb = shape_gradient(B, a), shape_gradient(B, b)
+        for k, l in ti.static(ti.ndrange(2, 2)):
+            h = 0.0
+            for j, m in ti.static(ti.ndrange(2, 2)):
+                h += ga[j] * D[2 * k + j, 2 * l + m] * gb[m]
+            out[2 * a + k, 2 * b + l] = vol * h
+    return out
+
+
+@ti.func
+def segment_weights(fb: ti.template(), ib: ti.template(), s) -> vec6:
+    """Segment s's signed barycentric weights over the 6 nodes of its two points:
+    -start point's, then +end point's."""
+    os = ib[Slot.SEG] + 3 * s
+    coef = vec6(0.0)
+    for k in ti.static(range(3)):
+        coef[k] = -fb[ib[Slot.PT_BARY] + 3 * ib[os] + k]
+        coef[3 + k] = fb[ib[Slot.PT_BARY] + 3 * ib[os + 1] + k]
+    return coef
+
+
+@ti.func
+def segment_block(fb: ti.template(), ib: ti.template(), s) -> mat2:
+    """K of segment s's Hessian block ``coef_a coef_b K`` (nodes a, b of its points,
+    :func:`segment_weights`): ``tau w / l (I - n n^T)``, plus the axial term
+    ``kc n n^T`` of a single-segment cable."""
+    c = ib[ib[Slot.SEG] + 3 * s + 2]
+    nv = get_v(fb, ib, Slot.SEG_N, s)
+    l = get_f(fb, ib, Slot.SEG_L, s)
+    K = mat2(0.0)
+    if l > 0.0:
+        K = get_f(fb, ib, Slot.TAU, c) * get_f(fb, ib, Slot.SEG_WT, s) / l * (
+            ti.Matrix.identity(ti.f64, 2) - nv.outer_product(nv))
+    if ib[Slot.SINGLE] != 0:
+        K += get_f(fb, ib, Slot.KC, c) * nv.outer_product(nv)
+    return K
+
+
 @kernel
 def k_hessian_entries(fb: F64, ib: I32, out: ti.types.ndarray(dtype=ti.f64, ndim=1),
                        serial: ti.template()):
@@ -331,37 +389,48 @@ def k_hessian_entries(fb: F64, ib: I32, out: ti.types.ndarray(dtype=ti.f64, ndim
     cables include their axial term kc dL/dx dL/dx^T. For the direct backend's assembly."""
     ti.loop_config(serialize=serial)
     for e in range(ib[Slot.M]):
-        B = get_m2(fb, ib, Slot.BM, e)
-        D = get_m4(fb, ib, Slot.D, e)
-        vol = get_f(fb, ib, Slot.VOL, e)
-        for a, b in ti.static(ti.ndrange(3, 3)):
-            ga, gb = shape_gradient(B, a), shape_gradient(B, b)
-            for k, l in ti.static(ti.ndrange(2, 2)):
-                h = 0.0
-                for j, m in ti.static(ti.ndrange(2, 2)):
-                    h += ga[j] * D[2 * k + j, 2 * l + m] * gb[m]
-                out[36 * e + 6 * (2 * a + k) + 2 * b + l] = vol * h
+        He = element_block(fb, ib, e)
+        for r in ti.static(range(6)):
+            for c in ti.static(range(6)):
+                out[36 * e + 6 * r + c] = He[r, c]
     base = 36 * ib[Slot.M]
     ti.loop_config(serialize=serial)
     for s in range(ib[Slot.S]):
-        os = ib[Slot.SEG] + 3 * s
-        c = ib[os + 2]
-        coef = ti.Vector([0.0] * 6, dt=ti.f64)
-        for k in ti.static(range(3)):
-            coef[k] = -fb[ib[Slot.PT_BARY] + 3 * ib[os] + k]
-            coef[3 + k] = fb[ib[Slot.PT_BARY] + 3 * ib[os + 1] + k]
-        nv = get_v(fb, ib, Slot.SEG_N, s)
-        l = get_f(fb, ib, Slot.SEG_L, s)
-        K = mat2(0.0)
-        if l > 0.0:
-            K = get_f(fb, ib, Slot.TAU, c) * get_f(fb, ib, Slot.SEG_WT, s) / l * (
-                ti.Matrix.identity(ti.f64, 2) - nv.outer_product(nv))
-        if ib[Slot.SINGLE] != 0:
-            K += get_f(fb, ib, Slot.KC, c) * nv.outer_product(nv)
+        coef, K = segment_weights(fb, ib, s), segment_block(fb, ib, s)
         for a, b in ti.ndrange(6, 6):
             cab = coef[a] * coef[b]
             for i, j in ti.static(ti.ndrange(2, 2)):
                 out[base + 144 * s + 12 * (2 * a + i) + 2 * b + j] = cab * K[i, j]
+
+
+@kernel
+def k_hessian_sums(fb: F64, ib: I32, scatter: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                    out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+    """``out[scatter[k]] += v_k`` for the entries v of :func:`k_hessian_entries`
+    in their order k, ``out`` zeroed first: ``np.bincount(scatter, weights=v)``
+    for any ``scatter`` (each sum's terms in the same order), without the
+    entries' list (1.6 M at level 5, whose writing and reading cost more than
+    the sums). Serial, whatever the model's size: the order is the sums'
+    round-off. ``scatter`` unchecked: every bin in ``out``."""
+    ti.loop_config(serialize=True)
+    for q in range(out.shape[0]):
+        out[q] = 0.0
+    ti.loop_config(serialize=True)
+    for e in range(ib[Slot.M]):
+        He = element_block(fb, ib, e)
+        for r in ti.static(range(6)):
+            for c in ti.static(range(6)):
+                out[scatter[36 * e + 6 * r + c]] += He[r, c]
+    base = 36 * ib[Slot.M]
+    ti.loop_config(serialize=True)
+    for s in range(ib[Slot.S]):
+        coef, K = segment_weights(fb, ib, s), segment_block(fb, ib, s)
+        for a in range(6):  # entry 12 (2 a + i) + 2 b + j: in order, as bincount takes them
+            for i in ti.static(range(2)):
+                for b in range(6):
+                    cab = coef[a] * coef[b]
+                    for j in ti.static(range(2)):
+                        out[scatter[base + 144 * s + 12 * (2 * a + i) + 2 * b + j]] += cab * K[i, j]
 
 
 @kernel

@@ -106,6 +106,7 @@ class Model:
         self.fb.from_numpy(host.fb)
         #: the last gradient dE/dx as the host sees it, (2n,) N
         self.last_gradient = np.zeros(2 * self.n)
+        self._sums_checked = (None, 0)  # the last scatter hessian_sums checked, and its bins
         self.ib.from_numpy(host.ib.astype(np.int32))
         #: the buffers' memory as numpy arrays where it is the host's (CPU backend;
         #: else None: the copy kernels move the arrays)
@@ -279,10 +280,10 @@ class Model:
         self.gradient_norm2()
         return self.last_gradient.reshape(self.n, 2).copy()
 
-    def prepare_hessian(self, project: bool = False) -> None:
-        """Element tangents (exact or PSD-projected), cable stiffnesses and the
-        block-Jacobi preconditioner at the current x."""
-        forces.k_hessian(self.fb, self.ib, 1 if project else 0, self.serial)
+    def prepare_hessian(self, project: bool = False, jacobi: bool = True) -> None:
+        """Element tangents (exact or PSD-projected), cable stiffnesses and (``jacobi``)
+        the block-Jacobi preconditioner at the current x."""
+        forces.k_hessian(self.fb, self.ib, 1 if project else 0, bool(jacobi), self.serial)
 
     def hessian_product(self, v: np.ndarray, project: bool = False,
                         prepare: bool = True) -> np.ndarray:
@@ -378,6 +379,24 @@ class Model:
         see :func:`~tendon_taichi.physics.forces.k_hessian_entries`."""
         out = np.empty(36 * self.m + 144 * self.S)
         forces.k_hessian_entries(self.fb, self.ib, out, self.serial)
+        return out
+
+    def hessian_sums(self, scatter: np.ndarray, bins: int) -> np.ndarray:
+        """The :meth:`hessian_entries` summed into ``bins`` bins, entry k into bin
+        ``scatter[k]`` (int32, (36 m + 144 S,), each < ``bins``): what
+        ``np.bincount(scatter, weights=self.hessian_entries(), minlength=bins)`` gives,
+        to the bit, (bins,); see :func:`~tendon_taichi.physics.forces.k_hessian_sums`.
+        ``scatter`` is checked at its first call: change none in place after it."""
+        if self._sums_checked[0] is not scatter or self._sums_checked[1] != bins:
+            # the kernel does not check its indices: each array once (the direct backend
+            # makes a new one where its pattern changes, never changes one in place)
+            if scatter.dtype != np.int32 or scatter.shape != (36 * self.m + 144 * self.S,):
+                raise ValueError("hessian_sums: scatter must be int32, one bin per Hessian entry")
+            if len(scatter) and not 0 <= scatter.min() <= scatter.max() < bins:
+                raise ValueError(f"hessian_sums: a bin outside 0..{bins - 1}")
+            self._sums_checked = (scatter, bins)
+        out = np.empty(bins)
+        forces.k_hessian_sums(self.fb, self.ib, np.ascontiguousarray(scatter), out)
         return out
 
     def hessian_data(self) -> dict[str, np.ndarray]:

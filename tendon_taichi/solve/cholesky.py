@@ -37,7 +37,7 @@ class LDL:
     def factor(self, data: np.ndarray) -> bool:
         """Factorize the matrix of entries ``data`` (in the pattern's order); whether
         it is positive definite (every pivot > 0), else the factors are not to be used."""
-        A = sp.csc_matrix((data[self.upper], self.indices, self.indptr), shape=(self.n, self.n))
+        A = sp.csc_matrix((np.take(data, self.upper), self.indices, self.indptr), shape=(self.n, self.n))
         if self.solver is None:
             self.solver = qdldl.Solver(A, upper=True)
         else:

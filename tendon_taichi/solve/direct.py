@@ -259,7 +259,7 @@ class DirectSolver(LinearSolver):
             uniq, pos = np.unique(order[c].astype(np.int64) * nf + order[r], return_inverse=True)
         indices = (uniq % nf).astype(np.int32)
         indptr = np.searchsorted(uniq // nf, np.arange(nf + 1)).astype(np.int32)
-        scatter = np.full(len(keep), len(uniq), dtype=np.intp)
+        scatter = np.full(len(keep), len(uniq), dtype=np.int32)
         scatter[keep] = pos
         return _Pattern(order, scatter, indices, indptr, len(uniq), reorder=not (self.ordered and m.single))
 
@@ -390,20 +390,16 @@ class DirectSolver(LinearSolver):
             full[:, j] = np.bincount(self.sdofs[s[j]], v[j], minlength=2 * m.n)
         return full, -k
 
-    def _values(self) -> np.ndarray:
-        """Every sparse Hessian entry in pattern order: element and segment blocks from Taichi."""
-        return self.model.hessian_entries()
-
     def assemble_ordered(self, project: bool = False, prepare: bool = True) -> Assembled:
         """``P H P^T``: the Hessian on the free DOFs in the fill-reducing order."""
+        m = self.model
         if prepare:
-            self.model.prepare_hessian(project)
+            m.prepare_hessian(project, jacobi=False)
         # the entries on fixed DOFs add into one more bin, dropped: a kept entry's sums
         # are those of the kept entries alone, in the same order
-        values = self._values()
-        data = np.bincount(self.scatter, weights=values, minlength=self.nnz + 1)[:self.nnz]
+        data = m.hessian_sums(self.scatter, self.nnz + 1)[:self.nnz]
         if len(self.detached):  # their blocks' parts within one triangle, once more (:meth:`_reattach`)
-            data += np.bincount(self._twice[1], weights=values[self._twice[0]], minlength=self.nnz)
+            data += np.bincount(self._twice[1], weights=m.hessian_entries()[self._twice[0]], minlength=self.nnz)
         U, K = self._low_rank()
         return Assembled(sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape), U, K)
 

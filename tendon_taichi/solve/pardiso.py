@@ -245,7 +245,7 @@ class PardisoLDL:
         it is positive definite (PARDISO's Cholesky met no pivot <= 0: its error -4),
         else the factors are not to be used (and the direct backend takes SuperLU,
         as it does where PARDISO fails otherwise, e.g. out of memory)."""
-        self._data[:] = data[self.lower]
+        np.take(data, self.lower, out=self._data, mode="clip")  # positions in range: no bounds check
         if not self._analyzed:
             if self._call(11)[0]:
                 return False
