@@ -32,7 +32,7 @@ def test_every_script_has_a_test():
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
               "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py",
-              "warm_newton.py", "auto_solver.py"}
+              "warm_newton.py", "auto_solver.py", "assembly.py"}
     assert scripts == tested
 
 
@@ -136,6 +136,15 @@ def test_auto_solver_times_direct_and_cg_on_the_same_optimization():
     assert all(w > 0 for w in walls) and float(rows[1][8]) > 0 and len(rows[0]) == 8  # the ratio on cg's row
     errors = [float(r[6]) for r in rows]  # one problem, two linear backends: the same optimum nearly
     assert int(rows[0][5]) > 0 and abs(errors[0] - errors[1]) < 0.1 * errors[0]
+
+
+def test_assembly_times_both_ways_and_finds_the_same_bits():
+    out = run(BENCH / "assembly.py", "t_shape", "--levels", 1, 2, "--repeat", 3).stdout.splitlines()
+    assert out[0].split()[:3] == ["level", "entries", "sparse"]
+    rows = [ln.split() for ln in out[1:]]
+    assert [r[0] for r in rows] == ["1", "2"] and all(r[-1] == "yes" for r in rows)
+    for r in rows:
+        assert int(r[1]) > int(r[2]) > 0 and float(r[3]) > 0 and float(r[4]) > 0
 
 
 def test_how_it_works_draws_five_panels(tmp_path):
