@@ -439,7 +439,7 @@ def test_hessian_sums_are_the_bincount_of_the_entries_to_the_bit():
     """The direct backend's assembly sums the element and segment entries in Taichi
     (``Model.hessian_sums``); each sum takes its terms in the entries' order, so it
     is ``np.bincount`` of ``hessian_entries`` bit for bit - for the backend's own
-    scatter (entries on clamped DOFs into one more bin) and for a shuffled one."""
+    scatter (entries on clamped DOFs into one more bin) and for a random one."""
     rng = np.random.default_rng(3)
     for m in _lattice_and_tendon_robot():
         d = DirectSolver(m)
