@@ -380,57 +380,62 @@ def segment_block(fb: ti.template(), ib: ti.template(), s) -> mat2:
     return K
 
 
-@kernel
-def k_hessian_entries(fb: F64, ib: I32, out: ti.types.ndarray(dtype=ti.f64, ndim=1),
-                       serial: ti.template()):
-    """The Hessian's element blocks (36 per element, (6, 6) row-major over the
-    corners' x, y) and segment blocks (144 per segment, over the 6 nodes of its
-    two points), as last prepared, with their capstan weights; single-segment
-    cables include their axial term kc dL/dx dL/dx^T. For the direct backend's assembly."""
-    ti.loop_config(serialize=serial)
+@ti.func
+def hessian_blocks(fb: ti.template(), ib: ti.template(), out: ti.template(), scatter: ti.template(),
+                   summed: ti.template(), serial: ti.template()):
+    """Every block entry v_k of the Hessian as last prepared, in the order k: element
+    e's 36 from ``36 e`` ((6, 6) row-major over its corners' x, y), then segment s's
+    144 from ``36 m + 144 s`` (over the 6 nodes of its two points), with their capstan
+    weights; single-segment cables include their axial term kc dL/dx dL/dx^T.
+    ``out[k] = v_k``, or with ``summed`` ``out[scatter[k]] += v_k`` - serially, so
+    that each sum takes its terms in the order k."""
+    ti.loop_config(serialize=serial or summed)
     for e in range(ib[Slot.M]):
         He = element_block(fb, ib, e)
         for r in ti.static(range(6)):
             for c in ti.static(range(6)):
-                out[36 * e + 6 * r + c] = He[r, c]
+                put_entry(out, scatter, 36 * e + 6 * r + c, He[r, c], summed)
     base = 36 * ib[Slot.M]
-    ti.loop_config(serialize=serial)
+    ti.loop_config(serialize=serial or summed)
     for s in range(ib[Slot.S]):
         coef, K = segment_weights(fb, ib, s), segment_block(fb, ib, s)
-        for a, b in ti.ndrange(6, 6):
-            cab = coef[a] * coef[b]
-            for i, j in ti.static(ti.ndrange(2, 2)):
-                out[base + 144 * s + 12 * (2 * a + i) + 2 * b + j] = cab * K[i, j]
+        for a in range(6):  # entry 12 (2 a + i) + 2 b + j
+            for i in ti.static(range(2)):
+                for b in range(6):
+                    cab = coef[a] * coef[b]
+                    for j in ti.static(range(2)):
+                        put_entry(out, scatter, base + 144 * s + 12 * (2 * a + i) + 2 * b + j, cab * K[i, j],
+                                  summed)
+
+
+@ti.func
+def put_entry(out: ti.template(), scatter: ti.template(), k, v, summed: ti.template()):
+    if ti.static(summed):
+        out[scatter[k]] += v
+    else:
+        out[k] = v
+
+
+@kernel
+def k_hessian_entries(fb: F64, ib: I32, out: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                       serial: ti.template()):
+    """The Hessian's block entries (:func:`hessian_blocks`), (36 m + 144 S,): for the
+    direct backend's assembly and its tests."""
+    hessian_blocks(fb, ib, out, out, False, serial)  # no scatter: out passed in its place
 
 
 @kernel
 def k_hessian_sums(fb: F64, ib: I32, scatter: ti.types.ndarray(dtype=ti.i32, ndim=1),
                     out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
-    """``out[scatter[k]] += v_k`` for the entries v of :func:`k_hessian_entries`
-    in their order k, ``out`` zeroed first: ``np.bincount(scatter, weights=v)``
-    for any ``scatter`` (each sum's terms in the same order), without the
-    entries' list (1.6 M at level 5, whose writing and reading cost more than
-    the sums). Serial, whatever the model's size: the order is the sums'
-    round-off. ``scatter`` unchecked: every bin in ``out``."""
+    """``out[scatter[k]] += v_k`` for the block entries v (:func:`hessian_blocks`),
+    ``out`` zeroed first: ``np.bincount(scatter, weights=v)`` to the bit, for any
+    ``scatter``, without the entries' list (1.6 M at level 5, whose writing and
+    reading cost more than the sums). Serial whatever the model's size: the order
+    is the sums' round-off. ``scatter`` unchecked: every bin in ``out``."""
     ti.loop_config(serialize=True)
     for q in range(out.shape[0]):
         out[q] = 0.0
-    ti.loop_config(serialize=True)
-    for e in range(ib[Slot.M]):
-        He = element_block(fb, ib, e)
-        for r in ti.static(range(6)):
-            for c in ti.static(range(6)):
-                out[scatter[36 * e + 6 * r + c]] += He[r, c]
-    base = 36 * ib[Slot.M]
-    ti.loop_config(serialize=True)
-    for s in range(ib[Slot.S]):
-        coef, K = segment_weights(fb, ib, s), segment_block(fb, ib, s)
-        for a in range(6):  # entry 12 (2 a + i) + 2 b + j: in order, as bincount takes them
-            for i in ti.static(range(2)):
-                for b in range(6):
-                    cab = coef[a] * coef[b]
-                    for j in ti.static(range(2)):
-                        out[scatter[base + 144 * s + 12 * (2 * a + i) + 2 * b + j]] += cab * K[i, j]
+    hessian_blocks(fb, ib, out, scatter, True, True)
 
 
 @kernel
