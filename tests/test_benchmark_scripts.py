@@ -258,7 +258,7 @@ def test_make_bench_writes_the_results_and_the_page(tmp_path):
     assert alone["peak_mb"] is None or 50 < alone["peak_mb"] < 5000  # Linux: read from /proc
     assert res["provenance"]["commit"] is None or res["provenance"]["commit"] in text
     table = (out / "table.txt").read_text().splitlines()
-    assert table[0].split()[:4] == ["level", "DOFs", "fibers", "solver"] and len(table) == 4  # header + cg, cg-amg, direct
+    assert table[0].split()[:4] == ["level", "DOFs", "fibers", "solver"] and len(table) == 5  # header + cg, cg-amg, cg-gmg, direct
     assert all(line in text for line in table) and "](../bench/bench.png)" in text
     assert np.isfinite(res["levels"][0]["solvers"]["direct"]["equilibrium_cold_s"]["median"])
     (out / "table.txt").unlink()

@@ -9,7 +9,7 @@ from reference import body_forces, fiber_forces, gravity_forces
 from tendon_taichi import (ConvergenceError, Model, NewtonSolver, build_problem, load_scene,
                            parse_scene)
 from tendon_taichi.solve import DirectSolver
-from tendon_taichi.solve.multigrid import rigid_modes
+from tendon_taichi.solve.multigrid import prolongation, rigid_modes
 
 
 def _residual_from_export(path):
@@ -60,12 +60,12 @@ def test_cg_and_direct_agree(scene, level):
     m = Model.from_problem(p)
     ac = 0.08 * p.fibers.a0
     xs = {}
-    for solver in ("cg", "cg-amg", "cg-jacobi", "direct"):
+    for solver in ("cg", "cg-amg", "cg-gmg", "cg-jacobi", "direct"):
         m.reset()
         eq = NewtonSolver(m, solver).solve(ac=ac)
         assert eq.residual <= 1e-10
         xs[solver] = eq.x
-    for solver in ("cg", "cg-amg", "cg-jacobi"):
+    for solver in ("cg", "cg-amg", "cg-gmg", "cg-jacobi"):
         assert np.abs(xs[solver] - xs["direct"]).max() <= 1e-8 * p.size
 
 
@@ -84,7 +84,7 @@ def test_warm_start_takes_fewer_newton_iterations(solver):
     assert np.abs(warm.x - cold.x).max() <= 1e-8 * p.size
 
 
-@pytest.mark.parametrize("solver", ["cg", "cg-amg", "cg-jacobi", "direct"])
+@pytest.mark.parametrize("solver", ["cg", "cg-amg", "cg-gmg", "cg-jacobi", "direct"])
 def test_newton_from_rest_iteration_count(solver):
     """Exact Hessian first (docs/method.md, numerics): t_shape level 2, uniform 0.05."""
     p = build_problem(load_scene("t_shape"), 2)
@@ -154,6 +154,63 @@ def test_multigrid_preconditioner_solves_to_the_direct_solution():
     assert np.abs(y - y_direct).max() <= 1e-8 * np.abs(y_direct).max()
     amg.linear.pre.reset()
     assert np.array_equal(amg.linear.solve(b, tol=1e-10), y)  # the same hierarchy again: replays rely on it
+
+
+def test_prolongation_interpolates_linear_fields_exactly():
+    """The geometric multigrid's transfer from a coarser mesh (not nested in the finer
+    one, the same region) reproduces every linear displacement field at the finer
+    free nodes; each row's weights add up to one, and no kept coarse node is idle."""
+    p = build_problem(load_scene("t_shape"), 3)
+    coarse = p.coarser_meshes()[0]
+    assert len(p.coarser_meshes()) == 1 and coarse.n_nodes < p.mesh.n_nodes / 3
+    points = p.mesh.nodes[~p.fixed]
+    P, kept = prolongation(points, coarse)
+    assert P.shape == (2 * len(points), 2 * len(kept))
+    A, c = np.array([[0.3, -1.2], [0.7, 0.4]]), np.array([0.05, -0.02])
+    u_coarse = (coarse.nodes[kept] @ A.T + c).ravel()  # interleaved (x0, y0, x1, ...)
+    u_fine = (points @ A.T + c).ravel()
+    assert np.abs(P @ u_coarse - u_fine).max() <= 1e-12 * np.abs(u_fine).max()
+    assert np.allclose(np.asarray(P.sum(axis=1)).ravel(), 1.0, rtol=0, atol=1e-14)
+    assert np.all(np.diff(P.tocsc().indptr) > 0)
+    # a coarse node that reaches none of the points (here: those of the upper half) has no column
+    upper = points[points[:, 1] > np.median(points[:, 1])]
+    P_up, kept_up = prolongation(upper, coarse)
+    assert len(kept_up) < len(kept) and np.all(np.diff(P_up.tocsc().indptr) > 0)
+    assert coarse.nodes[kept_up][:, 1].min() < upper[:, 1].min()  # ... but those just below it stay
+
+
+def test_geometric_multigrid_solves_to_the_direct_solution():
+    """cg-gmg at level 3 (one coarser mesh, level 1): PCG with the V-cycle of the
+    Hessian at the same state reaches the factorization's solution in few
+    iterations; the same state gives the same hierarchy, to the bit."""
+    p = build_problem(load_scene("t_shape"), 3)
+    rng = np.random.default_rng(3)
+    ac = rng.uniform(0.02, 0.08, p.fibers.n_fibers) * p.fibers.a0
+    gmg, direct = NewtonSolver(Model.from_problem(p), "cg-gmg"), NewtonSolver(Model.from_problem(p), "direct")
+    assert gmg.linear.name == "cg-gmg"  # what a recording keeps
+    x = gmg.solve(ac=ac, x0=p.mesh.nodes).x
+    assert np.abs(x - direct.solve(ac=ac, x0=p.mesh.nodes).x).max() <= 1e-8 * p.size
+    b = rng.standard_normal((p.mesh.n_nodes, 2))
+    gmg.linear.pre.reset()
+    y = gmg.linear.solve(b, tol=1e-10)
+    assert gmg.linear.pre.levels == 2
+    assert gmg.linear.last.iterations <= 30
+    y_direct = direct.linear.solve(b)
+    assert np.abs(y - y_direct).max() <= 1e-8 * np.abs(y_direct).max()
+    gmg.linear.pre.reset()
+    assert np.array_equal(gmg.linear.solve(b, tol=1e-10), y)
+
+
+def test_geometric_multigrid_without_coarser_meshes_is_the_direct_solve():
+    """A model not made from a problem has no coarser meshes: the V-cycle is the
+    direct solve of its one level, and PCG converges at once."""
+    p = build_problem(load_scene("t_shape"), 3)
+    m = Model(p.mesh, p.fixed, p.material, p.fiber_cables)
+    newton = NewtonSolver(m, "cg-gmg")
+    newton.solve(ac=0.05 * p.fibers.a0)
+    newton.linear.pre.reset()
+    newton.linear.solve(np.ones((p.mesh.n_nodes, 2)), tol=1e-10)
+    assert newton.linear.pre.levels == 1 and newton.linear.last.iterations <= 3
 
 
 def test_solve_many_after_a_long_cg_solve():

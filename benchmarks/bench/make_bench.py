@@ -6,9 +6,9 @@ Usage: python benchmarks/bench/make_bench.py [--levels 1 2 3 4 5 6] [--repeat 3]
        python benchmarks/bench/make_bench.py --page-only [--out DIR] [--page FILE]
 
 Runs the resolution-scaling benchmark on t_shape with the linear backends cg,
-cg-amg and direct, and the whole design pipeline with the backend ``--solver
+cg-amg, cg-gmg and direct, and the whole design pipeline with the backend ``--solver
 auto`` picks at each level
-(``tendon-taichi bench t_shape --levels ... --solver cg cg-amg direct --repeat N
+(``tendon-taichi bench t_shape --levels ... --solver cg cg-amg cg-gmg direct --repeat N
 --optimize-solver auto --out DIR``; ``--optimize-levels`` runs the whole
 optimization at those levels only), then writes DIR/table.txt and the page
 (the table, the fitted exponents, the plot, the optimization's quality per
@@ -48,7 +48,7 @@ measured by `tendon-taichi bench` (see `docs/cli.md`). This page and the files
 in `benchmarks/bench/` are written by `python benchmarks/bench/make_bench.py`;
 do not edit them by hand.
 
-Per level and linear backend (`cg`, `cg-amg` and `direct`, see the linear backends in
+Per level and linear backend (`cg`, `cg-amg`, `cg-gmg` and `direct`, see the linear backends in
 `docs/method.md`), in seconds (medians of the repeats, compiling the
 Taichi kernels excluded): `eq cold`, one equilibrium from rest; `eq warm`, one
 from the equilibrium of a design whose contraction ratios differ by +-0.5 %;
@@ -166,7 +166,7 @@ def main(argv=None) -> int:
         result = json.loads((args.out / "bench.json").read_text())
     else:
         with tempfile.TemporaryDirectory() as cases:  # the design folders are not results to check in
-            result = run_bench(load_scene("t_shape"), args.levels, ["cg", "cg-amg", "direct"], args.repeat,
+            result = run_bench(load_scene("t_shape"), args.levels, ["cg", "cg-amg", "cg-gmg", "direct"], args.repeat,
                                args.out, [] if args.no_optimize else args.optimize_levels, optimize_solver="auto",
                                cases_dir=cases)
         if args.alone is not None:

@@ -65,6 +65,18 @@ class Problem:
             return Walls.from_outline(body.outline, body.holes)
         return Walls.from_triangles(self.mesh.nodes[self.mesh.triangles])
 
+    def coarser_meshes(self) -> list[Mesh]:
+        """The body meshed at every other coarser level, ``level - 2``, ``level - 4``,
+        ... down to level 1 or 2 (each has about a quarter of the nodes of the one
+        before; none at levels 1 and 2): the hierarchy of the geometric multigrid
+        preconditioner (:mod:`tendon_taichi.solve.multigrid`). The meshes at two
+        levels are not nested, but they cover the same region."""
+        return list(self._coarser)
+
+    @cached_property
+    def _coarser(self) -> tuple[Mesh, ...]:
+        return tuple(_mesh_for_level(self.scene, lc) for lc in range(self.level - 2, 0, -2))
+
     @property
     def n_poses(self) -> int:
         return len(self.scene.poses)

@@ -12,6 +12,8 @@ work on the same buffers, through the public attributes ``fb``, ``ib`` and
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 from ..body.cables import CableSet
@@ -50,15 +52,20 @@ class Model:
         self.capstan = Capstan(cables, cables.points.positions(mesh.triangles, mesh.nodes), cables.friction) \
             if cables.has_friction else None
         self.point_map = PointMap(mesh.triangles, cables.points.tri, cables.points.bary, self.fixed)
+        #: the body's coarser meshes, finest first, made when first asked for (a
+        #: geometric multigrid's hierarchy); None for a model not made from a problem
+        self.coarser_meshes: Callable[[], list[Mesh]] | None = None
 
     @classmethod
     def from_problem(cls, problem, cables: CableSet | None = None,
                      parallel: bool | None = None) -> "Model":
         """The model of a :class:`~tendon_taichi.body.problem.Problem` with its fiber
         lattice (the idealized robot) or the given ``cables``."""
-        return cls(problem.mesh, problem.fixed, problem.material,
-                   problem.fiber_cables if cables is None else cables,
-                   eps=problem.scene.fibers.eps, parallel=parallel)
+        model = cls(problem.mesh, problem.fixed, problem.material,
+                    problem.fiber_cables if cables is None else cables,
+                    eps=problem.scene.fibers.eps, parallel=parallel)
+        model.coarser_meshes = problem.coarser_meshes
+        return model
 
     # ------------------------------------------------------------ upload
     def _upload(self) -> None:

@@ -1,8 +1,9 @@
 """The matrix-free CG backend: Hessian products in Taichi (the model is the
 operator), preconditioned by a reused factorization of the Hessian at a
 nearby state (``cg``), by a reused algebraic-multigrid V-cycle of it
-(``cg-amg``, :mod:`.multigrid`) or by 2x2 block Jacobi inside one fused Taichi
-kernel per iteration (``cg-jacobi``)."""
+(``cg-amg``, :mod:`.multigrid`), by a reused geometric-multigrid V-cycle over
+the body's coarser meshes (``cg-gmg``, the same module) or by 2x2 block Jacobi
+inside one fused Taichi kernel per iteration (``cg-jacobi``)."""
 
 from __future__ import annotations
 
@@ -18,11 +19,11 @@ from . import _cg_kernels as kernels
 from ._newton_kernels import newton_rhs, take_direction
 from .direct import Factorization
 from .linear import LinearSolver, LinearStats
-from .multigrid import MultigridPreconditioner
+from .multigrid import GeometricMultigridPreconditioner, MultigridPreconditioner
 from .preconditioner import ReusedPreconditioner
 
 #: preconditioner -> the backend's name in SOLVERS
-PRECONDITIONERS = {"factor": "cg", "multigrid": "cg-amg", "jacobi": "cg-jacobi"}
+PRECONDITIONERS = {"factor": "cg", "multigrid": "cg-amg", "geometric": "cg-gmg", "jacobi": "cg-jacobi"}
 
 
 @dataclass(frozen=True)
@@ -140,8 +141,8 @@ class FactorPreconditioner(ReusedPreconditioner):
 class CGSolver(LinearSolver):
     """Matrix-free PCG: Hessian products in Taichi, preconditioned by a reused
     factorization (``factor``, default), a reused algebraic-multigrid V-cycle
-    (``multigrid``) or by 2x2 block Jacobi inside one fused Taichi kernel per
-    iteration (``jacobi``)."""
+    (``multigrid``), a reused geometric-multigrid V-cycle (``geometric``) or
+    2x2 block Jacobi inside one fused Taichi kernel per iteration (``jacobi``)."""
 
     def __init__(self, model: Model, max_iter: int | None = None, preconditioner: str = "factor"):
         if preconditioner not in PRECONDITIONERS:
@@ -152,7 +153,8 @@ class CGSolver(LinearSolver):
         self.model = model
         self.preconditioner = preconditioner
         self.pre = (FactorPreconditioner(model) if preconditioner == "factor" else
-                    MultigridPreconditioner(model) if preconditioner == "multigrid" else None)
+                    MultigridPreconditioner(model) if preconditioner == "multigrid" else
+                    GeometricMultigridPreconditioner(model) if preconditioner == "geometric" else None)
         self.max_iter = max_iter or (200 if self.pre else max(1000, 4 * model.dofs))
         self.stats = LinearStats()
         self.last: CGStatus | None = None

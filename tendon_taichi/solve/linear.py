@@ -10,6 +10,8 @@ is the operator, its state is passed in. The backends by name (:data:`SOLVERS`):
   reused factorization of the Hessian at a nearby state;
 * ``cg-amg`` - the same PCG preconditioned by a reused algebraic-multigrid
   V-cycle of that Hessian (no factorization; cost linear in the DOFs);
+* ``cg-gmg`` - the same PCG preconditioned by a reused geometric-multigrid
+  V-cycle over the body's coarser meshes (no factorization but the coarsest);
 * ``cg-jacobi`` - block-Jacobi PCG entirely in Taichi;
 * ``direct`` - the Hessian assembled into a scipy sparse matrix and
   factorized (LDL^T, or SuperLU where it is not positive definite);
@@ -27,7 +29,7 @@ import numpy as np
 from ..errors import InputError
 
 #: every backend name a user may give (``--solver``, sweep files)
-SOLVERS = ("auto", "cg", "cg-amg", "cg-jacobi", "direct")
+SOLVERS = ("auto", "cg", "cg-amg", "cg-gmg", "cg-jacobi", "direct")
 
 #: ``auto`` takes the direct backend up to this many free DOFs and the
 #: factorization-preconditioned CG above. Measured on the 2-core CPU machine
