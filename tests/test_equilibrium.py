@@ -199,6 +199,11 @@ def test_geometric_multigrid_solves_to_the_direct_solution():
     assert np.abs(y - y_direct).max() <= 1e-8 * np.abs(y_direct).max()
     gmg.linear.pre.reset()
     assert np.array_equal(gmg.linear.solve(b, tol=1e-10), y)
+    # the V-cycle is a symmetric positive definite M^-1, as PCG needs
+    cycle, nf = gmg.linear.pre.operator, 2 * int((~p.fixed).sum())
+    u, v = rng.standard_normal(nf), rng.standard_normal(nf)
+    assert abs(u @ (cycle @ v) - v @ (cycle @ u)) <= 1e-10 * abs(u @ (cycle @ v))
+    assert u @ (cycle @ u) > 0.0
 
 
 def test_geometric_multigrid_without_coarser_meshes_is_the_direct_solve():

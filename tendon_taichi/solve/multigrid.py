@@ -80,9 +80,6 @@ class MultigridPreconditioner(ReusedPreconditioner):
         return operator @ r
 
 
-#: the smoother of the geometric V-cycle, before and after the coarse correction
-#: (symmetric, so that the V-cycle is a symmetric preconditioner, as PCG needs)
-SMOOTHER = ("gauss_seidel", {"sweep": "symmetric"})
 #: barycentric weights below this are round-off of a node on a coarse edge or vertex
 TINY_WEIGHT = 1e-12
 
@@ -126,8 +123,9 @@ class GeometricMultigridPreconditioner(ReusedPreconditioner):
     ``refresh_iterations``: a solve that takes more iterations than this marks
     the hierarchy stale. A fresh one preconditions the solves of t_shape's Newton
     steps to 4-30 iterations at levels 4 and 6, and rebuilding it costs about ten
-    of them: at 30 a cold equilibrium at level 6 took 1.4 s and a warm one 0.41 s,
-    at 80 (the algebraic one's) 2.8 and 1.9 s."""
+    of them: at 30 a cold equilibrium at level 6 took 1.1 s and a warm one 0.34 s,
+    at 20 1.0 and 0.41 s, at 45 2.2 and 0.39 s, at 80 (the algebraic one's) 2.2 and
+    1.5 s."""
 
     def __init__(self, model: Model, refresh_iterations: int = 30):
         super().__init__(model, refresh_iterations, ordered=False)
@@ -143,24 +141,55 @@ class GeometricMultigridPreconditioner(ReusedPreconditioner):
             self._prolongations = prolongations(m.mesh.nodes[~m.fixed], meshes)
         return self._prolongations
 
-    def build(self, project: bool):
-        from pyamg.multilevel import MultilevelSolver  # half a second to import: only where this backend runs
-        from pyamg.relaxation.smoothing import change_smoothers
-
+    def build(self, project: bool) -> "VCycle":
         A = self.direct.assemble_ordered(project=project).Hp.tocsr()
-        levels = []
+        operators, transfers = [A], []
         for P in self.transfers:
-            level = MultilevelSolver.Level()
-            level.A, level.P, level.R = A, P, P.T.tocsr()
-            levels.append(level)
-            A = (level.R @ A @ P).tocsr()
-        coarsest = MultilevelSolver.Level()
-        coarsest.A = A
-        levels.append(coarsest)
-        ml = MultilevelSolver(levels, coarse_solver="splu")
-        change_smoothers(ml, SMOOTHER, SMOOTHER)
-        self.levels = len(levels)
-        return ml.aspreconditioner(cycle="V")
+            R = P.T.tocsr()
+            transfers.append((P, R))
+            operators.append((R @ operators[-1] @ P).tocsr())
+        self.levels = len(operators)
+        return VCycle(operators, transfers)
 
     def apply(self, operator, r: np.ndarray) -> np.ndarray:
         return operator @ r
+
+
+class VCycle:
+    """``M^-1 r`` by one V-cycle: on each level but the coarsest, a symmetric
+    Gauss-Seidel sweep from zero, the residual restricted by ``R = P^T``, the
+    coarser level's correction prolonged by ``P``, another symmetric sweep; the
+    coarsest level solved by its LU factorization. The same sweeps before and
+    after make ``M^-1`` symmetric, as PCG needs; on one level it is that level's
+    exact inverse. (pyamg's own cycle, as a preconditioner, also forms the
+    residual before and after it: two more products with the finest operator
+    per application.)
+
+    ``operators``: each level's matrix (CSR), finest first; ``transfers``: the
+    ``(P, R)`` between each level and the next. Raises
+    :class:`numpy.linalg.LinAlgError` when the coarsest is singular."""
+
+    def __init__(self, operators: list[sp.csr_matrix], transfers: list[tuple[sp.csr_matrix, sp.csr_matrix]]):
+        import scipy.sparse.linalg as spla
+        from pyamg.relaxation.relaxation import gauss_seidel  # half a second to import: only where it runs
+
+        self._smooth = gauss_seidel
+        self.operators, self.transfers = operators, transfers
+        try:
+            self.coarsest = spla.splu(operators[-1].tocsc())
+        except RuntimeError as exc:  # "Factor is exactly singular"
+            raise np.linalg.LinAlgError(str(exc)) from None
+
+    def __matmul__(self, r: np.ndarray) -> np.ndarray:
+        return self._cycle(0, np.asarray(r, dtype=float))
+
+    def _cycle(self, level: int, b: np.ndarray) -> np.ndarray:
+        if level == len(self.transfers):
+            return self.coarsest.solve(b)
+        A = self.operators[level]
+        P, R = self.transfers[level]
+        x = np.zeros_like(b)
+        self._smooth(A, x, b, iterations=1, sweep="symmetric")
+        x += P @ self._cycle(level + 1, R @ (b - A @ x))
+        self._smooth(A, x, b, iterations=1, sweep="symmetric")
+        return x
