@@ -32,7 +32,7 @@ def test_every_script_has_a_test():
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
               "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py",
-              "warm_newton.py", "auto_solver.py", "assembly.py"}
+              "warm_newton.py", "auto_solver.py", "assembly.py", "multigrid.py"}
     assert scripts == tested
 
 
@@ -145,6 +145,19 @@ def test_assembly_times_both_ways_and_finds_the_same_bits():
     assert [r[0] for r in rows] == ["1", "2"] and all(r[-1] == "yes" for r in rows)
     for r in rows:
         assert int(r[1]) > int(r[2]) > 0 and float(r[3]) > 0 and float(r[4]) > 0
+
+
+def test_multigrid_compares_the_v_cycles_with_the_factorization():
+    out = run(BENCH / "multigrid.py", "t_shape", "--levels", 1, 3, "--repeat", 1).stdout.splitlines()
+    assert out[0].split()[:4] == ["level", "DOFs", "backend", "levels"]
+    rows = {(ln[:5].strip(), ln[13:37].strip()): ln[37:].split() for ln in out[1:]}
+    names = ["cg-gmg forward-backward", "cg-gmg symmetric", "cg-amg", "direct"]
+    assert sorted(rows) == sorted((lv, n) for lv in ("1", "3") for n in names)
+    for sweeps in names[:2]:
+        assert rows[("1", sweeps)][0] == "1" and rows[("1", sweeps)][2] == "1"  # one level: the exact inverse
+        levels, _, it8, _, it10, _ = rows[("3", sweeps)]
+        assert levels == "2" and 1 < int(it8) <= int(it10) <= 60  # level 3 over level 1
+    assert float(rows[("3", "direct")][-1]) > 0
 
 
 def test_how_it_works_draws_five_panels(tmp_path):

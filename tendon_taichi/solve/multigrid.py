@@ -112,7 +112,7 @@ def prolongations(points: np.ndarray, meshes: list[Mesh]) -> list[sp.csr_matrix]
 
 
 class GeometricMultigridPreconditioner(ReusedPreconditioner):
-    """M^-1 = one V-cycle (symmetric Gauss-Seidel smoothing, a direct solve on
+    """M^-1 = one V-cycle (Gauss-Seidel smoothing, :class:`VCycle`, a direct solve on
     the coarsest mesh) over the body's coarser meshes, each level's operator
     ``P^T A P`` from the Hessian's sparse part at a reference state (module
     docstring). The prolongations depend on the rest meshes alone and are made
@@ -130,6 +130,8 @@ class GeometricMultigridPreconditioner(ReusedPreconditioner):
     def __init__(self, model: Model, refresh_iterations: int = 30):
         super().__init__(model, refresh_iterations, ordered=False)
         self.levels = 0
+        #: the V-cycle's Gauss-Seidel sweeps (:data:`SWEEPS`)
+        self.sweeps = SWEEPS
         self._prolongations: list[sp.csr_matrix] | None = None
 
     @property
@@ -149,31 +151,38 @@ class GeometricMultigridPreconditioner(ReusedPreconditioner):
             transfers.append((P, R))
             operators.append((R @ operators[-1] @ P).tocsr())
         self.levels = len(operators)
-        return VCycle(operators, transfers)
+        return VCycle(operators, transfers, self.sweeps)
 
     def apply(self, operator, r: np.ndarray) -> np.ndarray:
         return operator @ r
 
 
+#: the Gauss-Seidel sweeps of the V-cycle before and after the coarse correction: a
+#: forward one and its adjoint, a backward one, keep M^-1 symmetric at half the cost of
+#: a symmetric sweep on each side, for a few more iterations (``benchmarks/multigrid.py``)
+SWEEPS = ("forward", "backward")
+
+
 class VCycle:
-    """``M^-1 r`` by one V-cycle: on each level but the coarsest, a symmetric
-    Gauss-Seidel sweep from zero, the residual restricted by ``R = P^T``, the
-    coarser level's correction prolonged by ``P``, another symmetric sweep; the
-    coarsest level solved by its LU factorization. The same sweeps before and
-    after make ``M^-1`` symmetric, as PCG needs; on one level it is that level's
-    exact inverse. (pyamg's own cycle, as a preconditioner, also forms the
-    residual before and after it: two more products with the finest operator
-    per application.)
+    """``M^-1 r`` by one V-cycle: on each level but the coarsest, a Gauss-Seidel
+    sweep from zero (``sweeps[0]``), the residual restricted by ``R = P^T``, the
+    coarser level's correction prolonged by ``P``, another sweep (``sweeps[1]``);
+    the coarsest level solved by its LU factorization. A forward sweep before and
+    a backward one after (or symmetric sweeps on both sides) make ``M^-1``
+    symmetric, as PCG needs; on one level it is that level's exact inverse.
+    (pyamg's own cycle, as a preconditioner, also forms the residual before and
+    after it: two more products with the finest operator per application.)
 
     ``operators``: each level's matrix (CSR), finest first; ``transfers``: the
     ``(P, R)`` between each level and the next. Raises
     :class:`numpy.linalg.LinAlgError` when the coarsest is singular."""
 
-    def __init__(self, operators: list[sp.csr_matrix], transfers: list[tuple[sp.csr_matrix, sp.csr_matrix]]):
+    def __init__(self, operators: list[sp.csr_matrix], transfers: list[tuple[sp.csr_matrix, sp.csr_matrix]],
+                 sweeps: tuple[str, str] = SWEEPS):
         import scipy.sparse.linalg as spla
         from pyamg.relaxation.relaxation import gauss_seidel  # half a second to import: only where it runs
 
-        self._smooth = gauss_seidel
+        self._smooth, self.sweeps = gauss_seidel, sweeps
         self.operators, self.transfers = operators, transfers
         try:
             self.coarsest = spla.splu(operators[-1].tocsc())
@@ -189,7 +198,7 @@ class VCycle:
         A = self.operators[level]
         P, R = self.transfers[level]
         x = np.zeros_like(b)
-        self._smooth(A, x, b, iterations=1, sweep="symmetric")
+        self._smooth(A, x, b, iterations=1, sweep=self.sweeps[0])
         x += P @ self._cycle(level + 1, R @ (b - A @ x))
-        self._smooth(A, x, b, iterations=1, sweep="symmetric")
+        self._smooth(A, x, b, iterations=1, sweep=self.sweeps[1])
         return x
