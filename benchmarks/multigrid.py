@@ -11,9 +11,8 @@ symmetric sweeps on both sides; ``cg-amg``) its levels, the time to build it at
 that state, and the PCG iterations and time (the Hessian products in Taichi)
 of one solve for a random right-hand side to each relative tolerance, building
 a fresh one first (its time included); for ``direct``, the time to assemble,
-factorize and solve. Times are
-the median of N repeats (default 3). docs/method.md (the linear backends)
-quotes its figures for t_shape.
+factorize and solve. Times are the median of N repeats (default 3).
+docs/method.md (the linear backends) quotes its figures for t_shape.
 """
 
 import argparse

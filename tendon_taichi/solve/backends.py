@@ -11,8 +11,9 @@ from .linear import SOLVERS, LinearSolver, resolve_solver
 
 def make_linear_solver(name: str, model: Model) -> LinearSolver:
     """A linear backend by name: ``cg`` (factorization-preconditioned), ``cg-amg``
-    (algebraic-multigrid-preconditioned), ``cg-gmg`` (geometric-multigrid-preconditioned), ``cg-jacobi`` (block Jacobi, all in
-    Taichi), ``direct`` or ``auto``."""
+    (algebraic-multigrid-preconditioned), ``cg-gmg`` (geometric-multigrid-
+    preconditioned), ``cg-jacobi`` (block Jacobi, all in Taichi), ``direct`` or
+    ``auto``."""
     name = resolve_solver(name, model.dofs)
     if name == "cg":
         return CGSolver(model)

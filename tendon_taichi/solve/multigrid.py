@@ -3,12 +3,12 @@ a hierarchy of the Hessian at a reference state, in place of a factorization
 of it - algebraic (``cg-amg``: smoothed aggregation, pyamg) or geometric
 (``cg-gmg``: the body's own coarser meshes).
 
-Building the hierarchy and applying a V-cycle both cost time linear in the DOFs
-(no fill), which a factorization does not promise (in 3D its fill grows much
-faster than the DOFs). The hierarchy is built from the assembled sparse part of
-the Hessian - elements and cable segments - in the free DOFs' own numbering;
-the rigid motions of the body at its current positions are the near-null space
-it is told about. A taut tendon's axial term ``kc g g^T`` (a dense rank-one
+Building a hierarchy and applying a V-cycle cost time about linear in the DOFs
+(no fill but the coarsest level's), which a factorization does not promise (in
+3D its fill grows much faster than the DOFs). Both are built from the assembled
+sparse part of the Hessian - elements and cable segments - in the free DOFs'
+own numbering; the algebraic one is told the rigid motions of the body at its
+current positions as the near-null space. A taut tendon's axial term ``kc g g^T`` (a dense rank-one
 block, :mod:`.direct`) is left to CG: a rank-r change of the operator costs CG
 at most r extra iterations, so the preconditioner need not see it.
 
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from ..body.mesh import Mesh
 from ..physics.model import Model
@@ -122,10 +123,10 @@ class GeometricMultigridPreconditioner(ReusedPreconditioner):
 
     ``refresh_iterations``: a solve that takes more iterations than this marks
     the hierarchy stale. A fresh one preconditions the solves of t_shape's Newton
-    steps to 4-30 iterations at levels 4 and 6, and rebuilding it costs about ten
-    of them: at 30 a cold equilibrium at level 6 took 1.1 s and a warm one 0.34 s,
-    at 20 1.0 and 0.41 s, at 45 2.2 and 0.39 s, at 80 (the algebraic one's) 2.2 and
-    1.5 s."""
+    steps to 4-40 iterations at levels 4 and 6, and rebuilding it costs about ten
+    of them: at 30 a cold equilibrium at level 6 took 0.96 s and a warm one 0.32 s,
+    at 20 0.94 and 0.37 s, at 45 1.7 and 0.40 s, at 80 (the algebraic one's) 1.7
+    and 1.1 s."""
 
     def __init__(self, model: Model, refresh_iterations: int = 30):
         super().__init__(model, refresh_iterations, ordered=False)
@@ -179,7 +180,6 @@ class VCycle:
 
     def __init__(self, operators: list[sp.csr_matrix], transfers: list[tuple[sp.csr_matrix, sp.csr_matrix]],
                  sweeps: tuple[str, str] = SWEEPS):
-        import scipy.sparse.linalg as spla
         from pyamg.relaxation.relaxation import gauss_seidel  # half a second to import: only where it runs
 
         self._smooth, self.sweeps = gauss_seidel, sweeps
