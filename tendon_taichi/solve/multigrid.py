@@ -97,7 +97,7 @@ def prolongation(points: np.ndarray, coarse: Mesh) -> tuple[sp.csr_matrix, np.nd
     rows = np.repeat(np.arange(len(points)), 3)
     P = sp.csr_matrix((w.ravel(), (rows, coarse.triangles[emb.tri].ravel())), shape=(len(points), coarse.n_nodes))
     P.eliminate_zeros()
-    kept = np.flatnonzero(np.diff(P.tocsc().indptr) > 0)
+    kept = np.unique(P.indices)  # the columns with a nonzero
     return sp.kron(P[:, kept], sp.identity(2), format="csr"), kept
 
 
