@@ -32,7 +32,7 @@ def test_every_script_has_a_test():
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
               "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py",
-              "warm_newton.py", "auto_solver.py", "assembly.py", "multigrid.py"}
+              "warm_newton.py", "auto_solver.py", "assembly.py", "multigrid.py", "pardiso_modes.py"}
     assert scripts == tested
 
 
@@ -158,6 +158,20 @@ def test_multigrid_compares_the_v_cycles_with_the_factorization():
         levels, _, it8, _, it10, _ = rows[("3", sweeps)]
         assert levels == "2" and 1 < int(it8) <= int(it10) <= 60  # level 3 over level 1
     assert float(rows[("3", "direct")][-1]) > 0
+
+
+def test_pardiso_modes_times_both_modes_and_the_reproducible_one_keeps_its_bits():
+    from tendon_taichi.solve import pardiso
+
+    if not pardiso.available():
+        pytest.skip("MKL PARDISO is not installed (the mkl extra)")
+    out = run(BENCH / "pardiso_modes.py", "t_shape", "--levels", 1, 4, "--repeat", 3).stdout.splitlines()
+    assert out[0].split()[:3] == ["level", "DOFs", "mode"]
+    rows = [ln.split() for ln in out[1:]]
+    assert [(r[0], r[2]) for r in rows] == [("1", "CNR"), ("1", "plain*"), ("4", "CNR*"), ("4", "plain")]
+    assert int(rows[0][1]) < pardiso.PARALLEL_MIN <= int(rows[2][1])
+    assert rows[0][-1] == rows[2][-1] == "yes"  # the mode: the same bits on one thread and two
+    assert all(float(r[i]) > 0 for r in rows for i in (3, 5, 6, 8))
 
 
 def test_how_it_works_draws_five_panels(tmp_path):

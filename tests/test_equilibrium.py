@@ -383,24 +383,29 @@ def test_every_blas_is_capped_however_late_it_loads():
 
 
 def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatch):
-    """A lattice's Hessian (t_shape at level 3, 2716 DOFs) factorized by PARDISO on
-    1, 2 and 3 threads, in its own order or PARDISO's, solves to the same bits; a
-    process factorizes a matrix above the parallel threshold on its threads only
-    while it has its cores to itself."""
+    """A lattice's Hessian (t_shape at level 4, 5336 DOFs: above the parallel
+    threshold, in the reproducible mode) factorized by PARDISO on 1, 2 and 3
+    threads, in its own order or PARDISO's, solves to the same bits; a process
+    factorizes a matrix above the threshold on its threads only while it has its
+    cores to itself, and one below it on one thread, outside the mode."""
+    import scipy.sparse as sp
+
     from tendon_taichi.physics import runtime
     from tendon_taichi.solve import pardiso
 
     use_cholesky(monkeypatch, "pardiso")
-    p = build_problem(load_scene("t_shape"), 3)
+    p = build_problem(load_scene("t_shape"), 4)
     m = Model.from_problem(p)
     NewtonSolver(m, "direct").solve(ac=0.05 * p.fibers.a0, x0=p.mesh.nodes)
     H = DirectSolver(m).assemble_ordered().Hp
     n = H.shape[0]
+    assert n >= pardiso.PARALLEL_MIN
     b = np.random.default_rng(0).standard_normal(n)
     for reorder in (False, True):  # the pattern's order (a lattice's), PARDISO's own (a tendon robot's)
         solutions = []
         for threads in (1, 2, 3):
             ldl = pardiso.PardisoLDL(H.indptr, H.indices, n, reorder=reorder)
+            assert ldl.reproducible
             ldl.threads = threads
             assert ldl.factor(H.data) and ldl.factor(H.data)
             assert ldl.threads_used == (threads if pardiso.threaded() else 1)
@@ -411,6 +416,11 @@ def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatc
     monkeypatch.setenv("TENDON_TAICHI_FACTOR_THREADS", "3")
     large = pardiso.PARALLEL_MIN
     assert pardiso.factor_threads(large) == 3 and pardiso.factor_threads(large - 1) == 1
+    eye = sp.identity(large - 1, format="csc")
+    below = pardiso.PardisoLDL(eye.indptr, eye.indices, large - 1)
+    assert not below.reproducible and below.threads == 1  # one thread: the same bits without the mode
+    assert below.factor(2.0 * eye.data)
+    assert np.allclose(below.solve(np.ones(large - 1)), 0.5, rtol=1e-14, atol=0.0)
     with runtime.cores_shared(True):
         assert pardiso.factor_threads(large) == 1
         with runtime.cores_shared(False):

@@ -29,16 +29,23 @@ Threads. From :data:`PARALLEL_MIN` DOFs a factorization runs on the process's
 threads (:func:`~tendon_taichi.physics.runtime.factor_threads`: its cores where it
 has them to itself - ``optimize``, ``simulate``, ``bench`` -, one in ``design``,
 whose worker processes hold the other cores, and in every worker): at level 5
-about 1.7x faster on two. Its numbers do not depend on the threads: PARDISO
-runs in its conditional numerical reproducibility mode (:data:`CNR`), in which
-the factors of t_shape's lattices at levels 3, 5 and 6 and of its tendon
+about 1.7x faster on two. Its numbers do not depend on the threads: there
+PARDISO runs in its conditional numerical reproducibility mode (:data:`CNR`), in
+which the factors of t_shape's lattices at levels 4, 5 and 6 and of its tendon
 patterns in PARDISO's own order solve to the same bits on one, two and three
 threads, and whatever the mode's number. Without it they did on an AMD EPYC
 (MKL's AVX2 code), but not on an Intel Xeon (its AVX-512 code): a level-3
 lattice's solutions differed by about 1e-15 between one thread and two, so that
 ``optimize`` (the process's threads) and ``design`` (one) would not have made
-the same run. The mode costs nothing measurable (level 5, two threads: 7.3-8.1 ms
-a factorization, against 7.5 without). With MKL's Intel OpenMP layer (its GNU
+the same run. The mode costs the factorization nothing measurable (level 5, two
+threads: 7.3-8.1 ms, against 7.5 without), but it takes each solve off PARDISO's
+sequential substitution onto its parallel one, a BLAS call per supernode: one
+solve of t_shape's lattice at levels 2 / 3 / 5 takes 117 / 250 / 1180 us in
+the mode against 48 / 110 / 725 us without (``python benchmarks/pardiso_modes.py``),
+and ``design t_shape --resolution 2`` spent a quarter of its time in them. Below
+:data:`PARALLEL_MIN` a factorization runs on one thread whatever the process,
+the same bits without the mode, so it is on only from there
+(:attr:`PardisoLDL.reproducible`). With MKL's Intel OpenMP layer (its GNU
 layer gives other bits, even on one thread); ``tests/test_equilibrium.py``
 checks it. A PARDISO handle runs every phase on the threads of its analysis (on
 others it crashes).
@@ -71,8 +78,9 @@ MKL_THREADING_INTEL, MKL_THREADING_SEQUENTIAL = 0, 1
 #: even the factorization (0.62 against 0.57 ms)
 PARALLEL_MIN = 4000
 
-#: ``iparm[33]``: PARDISO's conditional numerical reproducibility mode (CNR) on, the same bits on
-#: any number of threads (module docstring); any value above 0 gave the same bits and speed
+#: ``iparm[33]`` from :data:`PARALLEL_MIN` DOFs: PARDISO's conditional numerical reproducibility
+#: mode (CNR) on, the same bits on any number of threads (module docstring); any value above 0
+#: gave the same bits and speed. Below, 0: one thread, and solves 1.6-2.4x faster
 CNR = 1
 
 
@@ -174,16 +182,21 @@ class PardisoLDL:
     with the first, only the numbers after - the interface of the direct
     backend's qdldl :class:`~tendon_taichi.solve.cholesky.LDL`. The pattern is
     factorized in its own order, or with ``reorder`` in PARDISO's minimum degree
-    order of it (module docstring). One factorization is current at a time
-    (``generation`` counts them)."""
+    order of it (module docstring), in the reproducible mode or not
+    (``reproducible``, default: from :data:`PARALLEL_MIN` DOFs). One
+    factorization is current at a time (``generation`` counts them)."""
 
-    def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int, reorder: bool = False):
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int, reorder: bool = False,
+                 reproducible: bool | None = None):
         # the lower triangle by columns is the upper triangle by rows, as PARDISO takes it
         self.lower, ja, self.ia = triangle(indptr, indices, n, lower=True)
         self.ja = np.ascontiguousarray(ja, dtype=np.int32)
         self.n = n
         self.reorder = reorder
         self.threads = factor_threads(n)
+        #: whether it runs in the reproducible mode (:data:`CNR`); by default from
+        #: :data:`PARALLEL_MIN` DOFs, where a factorization may run on several threads
+        self.reproducible = n >= PARALLEL_MIN if reproducible is None else bool(reproducible)
         self.generation = 0
         self._pt = np.zeros(64, dtype=np.int64)
         self._iparm = np.zeros(64, dtype=np.int32)
@@ -192,7 +205,7 @@ class PardisoLDL:
         self._iparm[[0, 9, 34]] = (1, 13, 1)
         self._iparm[4] = 0 if reorder else 1
         self._iparm[17] = -1  # report the factor's entries (:attr:`entries`)
-        self._iparm[33] = CNR
+        self._iparm[33] = CNR if self.reproducible else 0
         self._perm = np.arange(n, dtype=np.int32)
         self._data = np.zeros(len(self.ja))
         self._analyzed = False  # phase 11 done (and its memory to release)
