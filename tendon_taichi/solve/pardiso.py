@@ -40,9 +40,10 @@ lattice's solutions differed by about 1e-15 between one thread and two, so that
 the same run. The mode costs the factorization nothing measurable (level 5, two
 threads: 7.3-8.1 ms, against 7.5 without), but it takes each solve off PARDISO's
 sequential substitution onto its parallel one, a BLAS call per supernode: one
-solve of t_shape's lattice at levels 2 / 3 / 5 takes 117 / 250 / 1180 us in
-the mode against 48 / 110 / 725 us without (``python benchmarks/pardiso_modes.py``),
-and ``design t_shape --resolution 2`` spent a quarter of its time in them. Below
+solve of t_shape's lattice at levels 2 / 3 / 5 takes 127 / 248 / 1354 us in
+the mode against 51 / 111 / 824 us without, on one thread
+(``python benchmarks/pardiso_modes.py``), and ``design t_shape --resolution 2``
+spent a quarter of its time in them. Below
 :data:`PARALLEL_MIN` a factorization runs on one thread whatever the process,
 the same bits without the mode, so it is on only from there
 (:attr:`PardisoLDL.reproducible`). With MKL's Intel OpenMP layer (its GNU
@@ -80,7 +81,7 @@ PARALLEL_MIN = 4000
 
 #: ``iparm[33]`` from :data:`PARALLEL_MIN` DOFs: PARDISO's conditional numerical reproducibility
 #: mode (CNR) on, the same bits on any number of threads (module docstring); any value above 0
-#: gave the same bits and speed. Below, 0: one thread, and solves 1.6-2.4x faster
+#: gave the same bits and speed. Below, 0: one thread, and solves 2.2-2.5x faster (levels 2-3)
 CNR = 1
 
 
