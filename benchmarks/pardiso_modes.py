@@ -26,7 +26,6 @@ from tendon_taichi.body.problem import build_problem
 from tendon_taichi.body.scene import load_scene
 from tendon_taichi.physics.model import Model
 from tendon_taichi.solve import pardiso
-from tendon_taichi.solve.direct import DirectSolver
 from tendon_taichi.solve.newton import NewtonSolver
 
 
@@ -35,8 +34,9 @@ def lattice_hessian(scene, level: int):
     problem = build_problem(scene, level)
     model = Model.from_problem(problem)
     first, _ = _designs(problem)
-    NewtonSolver(model, "direct").solve(ac=first * problem.fibers.a0, x0=problem.mesh.nodes)
-    return DirectSolver(model).assemble_ordered().Hp
+    newton = NewtonSolver(model, "direct")
+    newton.solve(ac=first * problem.fibers.a0, x0=problem.mesh.nodes)
+    return newton.linear.assemble_ordered().Hp  # the solver's own pattern, not a second one
 
 
 def median_us(fn, repeat: int) -> float:
