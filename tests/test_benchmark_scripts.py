@@ -32,7 +32,8 @@ def test_every_script_has_a_test():
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
               "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py",
-              "warm_newton.py", "auto_solver.py", "assembly.py", "multigrid.py", "pardiso_modes.py"}
+              "warm_newton.py", "auto_solver.py", "assembly.py", "multigrid.py", "pardiso_modes.py",
+              "route_gradients.py"}
     assert scripts == tested
 
 
@@ -69,6 +70,18 @@ def test_routes_side_by_side_runs_each_route_optimization_both_ways():
     assert out[1].startswith("SLSQP lower:")
     (old, new) = (int(ln.split(": ")[1].split()[0]) for ln in out[2:4])
     assert out[2].startswith("L-BFGS-B, penalty:") and out[3].startswith("SLSQP, constraint:") and old > 0 < new
+
+
+def test_route_gradients_runs_every_route_optimization_both_ways():
+    out = run(BENCH / "route_gradients.py", "t_shape", 1, "--stage-iterations", 25, "--k-min", 0.1,
+              "--extractors", "strands", "--refine", 1, "--beam", 1, "--no-converge",
+              "--repeat", 1).stdout.splitlines()[-4:]
+    assert out[0].startswith("route optimizations:") and int(out[0].split()[2]) > 0
+    assert out[1].startswith("gradient at every point:") and out[2].startswith("gradient where SLSQP asks:")
+    (every_points, every_adjoints), (points, adjoints) = (
+        [int(part.split()[0]) for part in ln.split(", ")[1:]] for ln in out[1:3])
+    assert every_points > 0 and 0 < adjoints < min(points, every_adjoints)  # fewer adjoint solves where asked
+    assert out[3].startswith("objective where asked / at every point: median")
 
 
 def test_secant_replay_solves_the_same_evaluations_both_ways():

@@ -168,6 +168,51 @@ def test_route_gradient_matches_central_differences():
     assert not J[:, n:].any()  # the contractions move no waypoint
 
 
+def test_a_point_valued_alone_leaves_the_next_gradient_exact(monkeypatch):
+    """The objective at a point without its gradient (a trial step SLSQP's line
+    search rejects: no adjoint solve) leaves the next point's gradient what a new
+    objective computes there, and it matches central differences; a gradient asked
+    at a point other than the last one valued is that point's. Route optimization
+    solves adjoints only at the points SLSQP asks the gradient of: fewer than the
+    points it values."""
+    from tendon_taichi.extract.routing import optimize_routes
+    from tendon_taichi.optimizer.soft_ik import PoseSolve
+
+    p = build_problem(load_scene("t_shape"), 1)
+    t = np.linspace(0, 1, 12)
+    route = fit_route(np.stack([0.04 * t, 0.075 - 0.004 * np.sin(np.pi * t)], 1), p.size, 0.4)
+    rs = RouteSettings(friction=0.3, clearance=0.02 * p.size, iterations=15)
+
+    def objective():
+        obj = RouteObjective(p, [route], p.scene.optimize, rs, "direct")
+        obj.eval_tol = 1e-14
+        return obj
+
+    obj, fresh = objective(), objective()
+    z = obj.pack([route], np.array([[0.08]]))
+    moved = z.copy()
+    moved[4:8] += 0.01  # a trial step elsewhere, valued only
+    obj.value(z)
+    obj.value(moved)
+    g = obj.gradient(z)  # not the last point valued: evaluated anew
+    f_new, g_new = fresh.evaluate(z)
+    assert obj.value(z) == pytest.approx(f_new, rel=1e-12)
+    assert np.abs(g - g_new).max() <= 1e-9 * np.abs(g_new).max()
+    for j in (0, 5, len(z) - 1):
+        h = 1e-6
+        e = np.zeros_like(z)
+        e[j] = h
+        fd = (fresh.evaluate(z + e)[0] - fresh.evaluate(z - e)[0]) / (2 * h)
+        assert g[j] == pytest.approx(fd, rel=2e-5, abs=1e-9 * np.abs(g).max()), j
+
+    adjoints = []
+    solve = PoseSolve.adjoint
+    monkeypatch.setattr(PoseSolve, "adjoint", lambda self, rhs: adjoints.append(1) or solve(self, rhs))
+    res = optimize_routes(p, [route], np.array([[0.08]]), p.scene.optimize, rs, "direct")
+    assert res.objective < 0.1 * res.objective_start
+    assert 0 < len(adjoints) < res.evaluations
+
+
 def test_route_optimization_keeps_the_clearance_where_the_best_route_would_not():
     """An arm route whose optimum with a clearance of 0.04 L lies against the wall:
     optimized with none, it passes nearer the wall than that; with it, it ends at the

@@ -20,7 +20,9 @@ is ``-lambda^T dR/dX`` from the same adjoint solve
 (:func:`~tendon_taichi.physics.waypoints.rest_point_gradient`), and the
 waypoints are linear in the control points (:mod:`.routes`). Every evaluation
 embeds the waypoints in the rest mesh anew and solves each pose's as-built
-equilibrium (capstan friction included), warm started from the last one. The
+equilibrium (capstan friction included), warm started from the last one; the
+adjoint solve follows only where SLSQP asks for the gradient (the point its line
+search accepts, :meth:`RouteObjective.gradient`), not at the trials it rejects. The
 contractions are bounded by ``STROKE`` x max_contraction: a route shaped to need
 the whole stroke on one mesh has none left on a finer one.
 
@@ -165,6 +167,7 @@ class RouteObjective:
         self.positions: list[np.ndarray] | None = None  # each pose's last equilibrium (warm starts)
         self.eval_tol: float | None = None
         self.ik: SoftIK | None = None  # the robot of the last evaluation
+        self._at: tuple | None = None  # the last point valued: z, its routes, their waypoints, shape gradients
         self.evaluations = 0
 
     # ------------------------------------------------------------ variables
@@ -235,24 +238,41 @@ class RouteObjective:
     def evaluate(self, z: np.ndarray) -> tuple[float, np.ndarray]:
         """O and dO/dz at z; raises ConvergenceError when an equilibrium fails or a
         route has shrunk to a point (``COLLAPSED``)."""
+        return self.value(z), self.gradient(z)
+
+    def value(self, z: np.ndarray) -> float:
+        """O at z, each pose's equilibrium solved; its gradient by :meth:`gradient`.
+        Raises as :meth:`evaluate` does."""
         routes, ratios = self.unpack(z)
         points = [r.waypoints for r in routes]
         if min(polyline_length(p) for p in points) <= COLLAPSED * self.L:
             raise ConvergenceError("a route has shrunk to a point")
+        self._at = None
         ik = self.soft_ik(routes)
-        f, g_r = ik.evaluate(ratios.ravel())
+        f = ik.value(ratios.ravel())
         self.positions = [ps.model.positions() for ps in ik.poses]
+        ff, gf = shape_cost(points, self.rs)
+        self._at = (np.array(z), routes, points, gf)
+        self.evaluations += 1
+        return f + ff
+
+    def gradient(self, z: np.ndarray) -> np.ndarray:
+        """dO/dz at z: the adjoint solves at the last point :meth:`value` evaluated
+        where that is z, else at z evaluated anew."""
+        if self._at is None or not np.array_equal(z, self._at[0]):
+            self.value(z)
+        _, routes, points, gf = self._at
+        ik = self.ik
+        g_r = ik.gradient()
         gX = np.zeros((ik.model.P, 2))
         for ps, lam in zip(ik.poses, ik.adjoints):
             gX -= rest_point_gradient(ps.model, lam)
-        ff, gf = shape_cost(points, self.rs)
         gX += np.concatenate(gf)
         g_c, at = [], 0
         for r, p in zip(routes, points):
             g_c.append(r.basis.T @ gX[at:at + len(p)])
             at += len(p)
-        self.evaluations += 1
-        return f + ff, np.concatenate([np.concatenate(g_c).ravel() * self.L, g_r])
+        return np.concatenate([np.concatenate(g_c).ravel() * self.L, g_r])
 
 
 @dataclass
@@ -292,20 +312,29 @@ def optimize_routes(problem: Problem, routes: list[Route], ratios: np.ndarray, s
 
     def fun(z):
         if "z" in last and np.array_equal(z, last["z"]):  # SLSQP starts where we did
-            return last["f"], last["g"].copy()
+            return last["f"]
         try:
-            f, g = obj.evaluate(z)
+            f = obj.value(z)
         except ConvergenceError:  # an equilibrium that fails is a step too far: make it look bad
             f0 = lowest["f"] if np.isfinite(lowest["f"]) else 1.0
-            return 10.0 * abs(f0) + 1.0, np.zeros_like(z)
-        last.update(z=np.array(z), f=f, g=g.copy())
+            last.update(z=np.array(z), f=10.0 * abs(f0) + 1.0, failed=True)
+            return last["f"]
+        last.update(z=np.array(z), f=f, failed=False)
         if f < lowest["f"]:
             lowest.update(f=f, z=np.array(z))
         if f < best["f"] and clearance(z).min() >= margin:
             best.update(f=f, z=np.array(z))
-        return f, g
+        return f
 
-    f_start, _ = fun(z0)
+    def jac(z):  # SLSQP asks at the point its line search accepted, the last one fun valued
+        if "z" in last and np.array_equal(z, last["z"]) and last["failed"]:
+            return np.zeros_like(z)
+        try:
+            return obj.gradient(z)
+        except ConvergenceError:
+            return np.zeros_like(z)
+
+    f_start = fun(z0)
     it = {"k": 0}
 
     def callback(xk):
@@ -314,7 +343,7 @@ def optimize_routes(problem: Problem, routes: list[Route], ratios: np.ndarray, s
             on_iteration(it["k"], best["f"])
 
     constraint = {"type": "ineq", "fun": clearance, "jac": lambda z: obj.clearance(z)[1]}
-    res = so.minimize(fun, z0, jac=True, method="SLSQP", bounds=obj.bounds(), constraints=[constraint],
+    res = so.minimize(fun, z0, jac=jac, method="SLSQP", bounds=obj.bounds(), constraints=[constraint],
                       callback=callback, options={"maxiter": route_settings.iterations, "ftol": 1e-12})
     found = best if np.isfinite(best["f"]) else lowest
     out_routes, out_ratios = obj.unpack(found["z"])

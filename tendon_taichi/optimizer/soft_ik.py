@@ -214,8 +214,10 @@ class SoftIK:
         self.k: float | None = None
         self.configure(None)
         self.evaluations = 0
-        #: the last evaluated point: r, objective, gradient, evaluation, positions (P, n, 2), tensions (P, C)
-        self._last: tuple[np.ndarray, float, np.ndarray, Evaluation, np.ndarray, np.ndarray] | None = None
+        #: the last evaluated point: r, objective, gradient (None until :meth:`gradient`), evaluation,
+        #: positions (P, n, 2), tensions (P, C); and its cables' states (``Model.cable_state``)
+        self._cabs: list[dict] = []
+        self._last: tuple[np.ndarray, float, np.ndarray | None, Evaluation, np.ndarray, np.ndarray] | None = None
         self.eval_tol = EVAL_TOL
         #: each pose's adjoint lambda (n, 2) of the last evaluation
         self.adjoints: list[np.ndarray] = []
@@ -284,9 +286,15 @@ class SoftIK:
     # ------------------------------------------------------------ evaluation
     def evaluate(self, r: np.ndarray) -> tuple[float, np.ndarray]:
         """Objective and its gradient w.r.t. r at the poses' equilibria for r."""
+        return self.value(r), self.gradient()
+
+    def value(self, r: np.ndarray) -> float:
+        """The objective at the poses' equilibria for r, its gradient left to
+        :meth:`gradient` (an optimizer's line search that rejects the point needs
+        none: its adjoint solves are saved)."""
         r = np.array(r, dtype=float)
         if self._last is not None and np.array_equal(r, self._last[0]):
-            return self._last[1], self._last[2]
+            return self._last[1]
         ac = self.split(r * self.a0)
         states, cabs = [], []
         for i, ps in enumerate(self.poses):
@@ -294,9 +302,21 @@ class SoftIK:
             cabs.append(ps.model.cable_state())
             states.append(State(eq.x, ac[i], cabs[-1]["tau"], i))
         ev = self.objective.evaluate(states)
+        self.adjoints = []
+        self.evaluations += 1
+        self._cabs = cabs
+        self._last = (r, ev.total, None, ev, np.array([s.x for s in states]), np.array([s.tau for s in states]))
+        return ev.total
+
+    def gradient(self) -> np.ndarray:
+        """The gradient w.r.t. r (P C,) at the last point :meth:`value` evaluated: one
+        adjoint solve per pose (``adjoints``), at its equilibrium."""
+        r, total, grad, ev, xs, taus = self._last
+        if grad is not None:
+            return grad
         grad = np.empty((len(self.poses), self.n_cables))
         self.adjoints = []
-        for i, (ps, cab) in enumerate(zip(self.poses, cabs)):
+        for i, (ps, cab) in enumerate(zip(self.poses, self._cabs)):
             m = ps.model
             # the whole x-derivative, through the tensions too, and one adjoint solve
             dOdx = ev.dx[i] + m.length_jacobian_product(ev.dtau[i] * cab["kc"])
@@ -307,9 +327,8 @@ class SoftIK:
             self.adjoints.append(lam)
             grad[i] = ev.dac[i] + ev.dtau[i] * cab["tau_ac"] - m.mixed_transpose_product(lam)
         grad = grad.ravel() * self.a0
-        self.evaluations += 1
-        self._last = (r, ev.total, grad, ev, np.array([s.x for s in states]), np.array([s.tau for s in states]))
-        return ev.total, grad
+        self._last = (r, total, grad, ev, xs, taus)
+        return grad
 
     def figures(self, r: np.ndarray) -> Figures:
         """Figures at r (evaluated if it is not the last point)."""

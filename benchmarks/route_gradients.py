@@ -1,0 +1,91 @@
+"""Route optimization with the gradient at every point it values, and only where SLSQP asks.
+
+Usage: python benchmarks/route_gradients.py SCENE [LEVEL] [DESIGN FLAGS ...] [--repeat N]
+
+Runs ``tendon-taichi design SCENE --resolution LEVEL --workers 0`` (default
+level 1, and any further ``design`` flags given) in this process and keeps the
+arguments of every route optimization it makes (``route_replay.record``).
+Then it runs them all again N times (default 2) each way, alternating: with
+each point's adjoint solved as the point is valued (what ``optimize_routes``
+did before: the trial points SLSQP's line search rejects had their gradient
+computed too) and as ``optimize_routes`` does now (the adjoint only at the
+points SLSQP asks the gradient of). It prints per way the median time, the
+points valued and the adjoint solves, and how the objectives the two ways end
+at compare, call by call (they follow different paths from the same starts: a
+point's equilibrium starts from the last factorization, which an adjoint
+solve refreshes). docs/method.md ("Route optimization") quotes its figures
+for t_shape at level 2.
+"""
+
+import sys
+import time
+
+import numpy as np
+
+from tendon_taichi.extract import routing
+from tendon_taichi.extract.routing import RouteObjective
+from tendon_taichi.optimizer.soft_ik import PoseSolve
+from tendon_taichi.physics import runtime
+
+from _scene_args import scene_args
+from route_replay import record
+
+WAYS = {"gradient at every point": True, "gradient where SLSQP asks": False}
+
+
+def replay(calls: list[tuple], every_point: bool) -> tuple[float, int, int, list[float]]:
+    """Every call again, with ``every_point`` each point's adjoint solved as it is
+    valued: the time (s), the points valued, the adjoint solves and each call's objective."""
+    adjoints = [0]
+    value, adjoint = RouteObjective.value, PoseSolve.adjoint
+
+    def counted(self, rhs):
+        adjoints[0] += 1
+        return adjoint(self, rhs)
+
+    def valued_with_gradient(self, z):
+        f = value(self, z)
+        self.gradient(z)
+        return f
+
+    PoseSolve.adjoint = counted
+    if every_point:
+        RouteObjective.value = valued_with_gradient
+    try:
+        seconds, points, objectives = 0.0, 0, []
+        for args, kwargs in calls:
+            t0 = time.perf_counter()
+            out = routing.optimize_routes(*args, **kwargs)
+            seconds += time.perf_counter() - t0
+            points += out.evaluations
+            objectives.append(out.objective)
+    finally:
+        RouteObjective.value, PoseSolve.adjoint = value, adjoint
+    return seconds, points, adjoints[0], objectives
+
+
+def run(argv: list[str]) -> None:
+    scene, level, flags, repeat = scene_args(argv, repeat=2)
+    calls = record([scene, "--resolution", level, *flags])
+    runs = {label: [] for label in WAYS}
+    with runtime.cores_shared():  # one thread per factorization, as in design's processes
+        for _ in range(repeat):
+            for label, every_point in WAYS.items():
+                runs[label].append(replay(calls, every_point))
+    print(f"route optimizations: {len(calls)} ({scene} level {level})")
+    for label, done in runs.items():
+        median = float(np.median([r[0] for r in done]))
+        print(f"{label}: {median:.2f} s, {done[0][1]} points valued, {done[0][2]} adjoint solves")
+    every, asked = (np.array(runs[label][0][3]) for label in WAYS)
+    kept = np.isfinite(every) & np.isfinite(asked) & (every > 0)
+    ratio = asked[kept] / every[kept]
+    print(f"objective where asked / at every point: median {np.median(ratio):.3f}, from {ratio.min():.3f} to "
+          f"{ratio.max():.3f}; over 1 % lower in {int((ratio < 0.99).sum())}, over 1 % higher in "
+          f"{int((ratio > 1.01).sum())} of {len(ratio)}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) < 2:
+        print(__doc__.split("\n\n")[1], file=sys.stderr)
+        sys.exit(2)
+    run(sys.argv[1:])
