@@ -25,10 +25,9 @@ import numpy as np
 from tendon_taichi.extract import routing
 from tendon_taichi.extract.routing import RouteObjective
 from tendon_taichi.optimizer.soft_ik import PoseSolve
-from tendon_taichi.physics import runtime
 
 from _scene_args import scene_args
-from route_replay import record
+from route_replay import alternating, record
 
 WAYS = {"gradient at every point": True, "gradient where SLSQP asks": False}
 
@@ -67,11 +66,7 @@ def replay(calls: list[tuple], every_point: bool) -> tuple[float, int, int, list
 def run(argv: list[str]) -> None:
     scene, level, flags, repeat = scene_args(argv, repeat=2)
     calls = record([scene, "--resolution", level, *flags])
-    runs = {label: [] for label in WAYS}
-    with runtime.cores_shared():  # one thread per factorization, as in design's processes
-        for _ in range(repeat):
-            for label, every_point in WAYS.items():
-                runs[label].append(replay(calls, every_point))
+    runs = alternating(calls, WAYS, replay, repeat)
     print(f"route optimizations: {len(calls)} ({scene} level {level})")
     for label, done in runs.items():
         median = float(np.median([r[0] for r in done]))

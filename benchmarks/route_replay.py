@@ -84,15 +84,23 @@ def replay(calls: list[tuple], detached_max: int) -> tuple[float, int, float]:
     return seconds, evaluations, total
 
 
+def alternating(calls: list[tuple], settings: dict, replay, repeat: int) -> dict[str, list]:
+    """``replay(calls, value)`` ``repeat`` times for each ``settings`` label and value,
+    the settings alternating, one thread per factorization (as in design's
+    processes): per label, the list of what each replay returned."""
+    runs = {label: [] for label in settings}
+    with runtime.cores_shared():
+        for _ in range(repeat):
+            for label, value in settings.items():
+                runs[label].append(replay(calls, value))
+    return runs
+
+
 def run(argv: list[str]) -> None:
     scene, level, flags, repeat = scene_args(argv, repeat=2)
     calls = record([scene, "--resolution", level, *flags])
     settings = {"every pattern made anew": 0, "detached segments": direct.DETACHED_MAX}
-    runs = {label: [] for label in settings}
-    with runtime.cores_shared():  # one thread per factorization, as in design's processes
-        for _ in range(repeat):
-            for label, detached_max in settings.items():
-                runs[label].append(replay(calls, detached_max))
+    runs = alternating(calls, settings, replay, repeat)
     print(f"route optimizations: {len(calls)} ({scene} level {level})")
     for label, done in runs.items():
         median = float(np.median([r[0] for r in done]))
