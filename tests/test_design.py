@@ -259,10 +259,12 @@ def test_goals_out_of_reach_stop_before_extraction_and_keep_the_run(cli, tmp_pat
     """Goals the optimized fibers miss by more than the budget (one 5 L away; one
     a stretch the contracting fibers cannot make) end the design after the
     optimization with one line: no layout is searched, the run is kept, and the
-    budget that designs anyway is named where there is one below 1."""
+    budget that designs anyway is named where there is one below 1. The worker
+    process, stopped as the design ends, leaves no warm-up folder behind."""
     (tmp_path / "s.toml").write_text(SCENE.replace("goal = [0.066, 0.02]", f"goal = {goal}"))
+    (tmp_path / "tmp").mkdir()
     r = cli("design", "s.toml", "--out", "out", "--quiet", "--stage-iterations", "10", "--k-min", "0.4",
-            cwd=tmp_path)
+            "--workers", "1", cwd=tmp_path, env={"TMPDIR": str(tmp_path / "tmp")})
     assert r.returncode == 2 and r.stdout == ""
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("tendon-taichi: error: the goals are out of reach: "), r.stderr
@@ -274,6 +276,7 @@ def test_goals_out_of_reach_stop_before_extraction_and_keep_the_run(cli, tmp_pat
         enough = float(re.search(r"a --budget of ([0-9.]+) or more", lines[0]).group(1))
         assert error <= enough <= 1.01 * error and enough < 1.0
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["run.npz", "run.rrd"]
+    assert list((tmp_path / "tmp").iterdir()) == []
     recorded = [st.summary["pose_error_rel"] for st in read_recording(tmp_path / "out" / "run.rrd").stages]
     assert min(recorded) == pytest.approx(error, rel=1e-3)
 

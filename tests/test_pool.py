@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from functools import partial
@@ -63,6 +64,34 @@ def running(pid: int) -> bool:
 
 def broken_setup() -> None:
     raise RuntimeError("no Taichi here")
+
+
+def setup_in_a_temporary_folder(folder: str) -> None:
+    """A set-up that takes long inside a temporary folder of its own (under
+    ``folder``), as ``design``'s warm-up does; says it is there by a file."""
+    with tempfile.TemporaryDirectory(dir=folder) as tmp:
+        (Path(tmp) / "started").write_text("")
+        time.sleep(120)
+
+
+#: a job whose worker is still setting up when the job is killed
+SETTING_UP = """
+import sys, time
+sys.path.insert(0, {tests!r})
+from tendon_taichi.tasks.pool import Pool
+from test_pool import setup_in_a_temporary_folder
+
+if __name__ == "__main__":
+    with Pool(1, setup_in_a_temporary_folder, ({folder!r},)):
+        time.sleep(120)
+"""
+
+
+def wait_for(condition, seconds: float) -> bool:
+    deadline = time.monotonic() + seconds
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return condition()
 
 
 #: the threads that pickled a Traced (in this process)
@@ -149,3 +178,26 @@ def test_a_worker_ends_when_the_job_that_started_it_is_killed(tmp_path, sig):
     while running(workers[0]) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not running(workers[0])
+
+
+def test_a_worker_stopped_while_it_sets_up_cleans_up_after_itself(tmp_path):
+    """A job that ends early (an error, Ctrl-C) stops its workers at once: one
+    still in its set-up leaves it through its ``with`` blocks, so that the
+    temporary folder the set-up made is gone, not left behind."""
+    with pytest.raises(KeyboardInterrupt):
+        with Pool(1, setup_in_a_temporary_folder, (str(tmp_path),)):
+            assert wait_for(lambda: list(tmp_path.glob("*/started")), 60)
+            raise KeyboardInterrupt
+    assert wait_for(lambda: not any(tmp_path.iterdir()), 20), list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_a_worker_whose_job_is_killed_while_it_sets_up_cleans_up_after_itself(tmp_path, sig):
+    """A job killed from outside stops nobody: its worker, still setting up, cleans
+    up (its temporary folder is gone) and ends."""
+    (tmp_path / "job.py").write_text(SETTING_UP.format(tests=str(Path(__file__).parent), folder=str(tmp_path)))
+    job = subprocess.Popen([sys.executable, str(tmp_path / "job.py")], stderr=subprocess.DEVNULL)
+    assert wait_for(lambda: list(tmp_path.glob("*/started")), 60)
+    job.send_signal(sig)
+    job.wait(timeout=30)
+    assert wait_for(lambda: [p.name for p in tmp_path.iterdir()] == ["job.py"], 20), list(tmp_path.iterdir())

@@ -21,7 +21,10 @@ quietly) breaks the pool: the items it had are run again here and the pool
 runs everything here from then on (``broken`` says why). An exception ``fn``
 raises in a worker is raised here, as it would be in-process. Workers ignore
 Ctrl-C: the process that runs the job stops them. A worker whose job process
-is gone (killed, so that it stopped nobody) ends at once.
+is gone (killed, so that it stopped nobody) ends at once. A worker stopped
+while its ``setup`` runs (the job ended early: an error, Ctrl-C, a kill)
+leaves ``setup`` by ``SystemExit``, so that what ``setup`` wrote in ``with``
+blocks (``design``'s warm-up: a temporary folder) is cleaned up.
 
 Spawned workers import the main module again: a script that makes a pool (or
 calls ``design`` with workers) does so under ``if __name__ == "__main__":``.
@@ -35,6 +38,7 @@ import os
 import pickle
 import signal
 import threading
+import time
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Iterable
@@ -50,18 +54,36 @@ def _ready() -> bool:
     return True
 
 
+#: seconds a worker whose job process is gone gives its ``setup`` to clean up before it ends anyway
+CLEAN_UP_S = 10.0
+
+
 def _start(setup: Callable[..., Any] | None, args: tuple) -> None:
     """A worker's start: Ctrl-C is for the process that runs the job (it stops the
     workers), the worker ends with that process (:func:`_end_with_parent`), then
-    ``setup``; a set-up that fails ends the worker quietly (the pool breaks, and
-    the job goes on in its own process)."""
+    ``setup``, during which SIGTERM (:meth:`Pool.close`, :func:`_end_with_parent`)
+    raises ``SystemExit`` so that ``setup`` cleans up; a set-up that fails or is
+    stopped ends the worker quietly (the pool breaks, and the job goes on in its
+    own process)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _end_with_parent()
     try:
-        if setup is not None:
-            setup(*args)
+        signal.signal(signal.SIGTERM, _leave_setup)
+        try:
+            if setup is not None:
+                setup(*args)
+        finally:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a task stopped midway has nothing to clean up
     except BaseException:  # noqa: BLE001 - reported by the pool as broken, not as a traceback here
         os._exit(1)
+
+
+def _leave_setup(signum: int, frame: Any) -> None:
+    """SIGTERM during a worker's ``setup``: leave it by ``SystemExit``, through its
+    ``with`` and ``finally`` blocks; a second SIGTERM (:func:`_end_with_parent`
+    after :meth:`Pool.close`) would interrupt that clean-up, so it is ignored."""
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise SystemExit(1)
 
 
 def _end_with_parent() -> None:
@@ -69,13 +91,17 @@ def _end_with_parent() -> None:
     (SIGTERM from ``timeout`` or a batch scheduler, SIGKILL, out of memory) stops
     no workers, and a worker would otherwise compute its task to the end - many
     minutes of a front search - for no one. A daemon thread waits on the parent's
-    sentinel, which becomes ready when the parent process ends."""
+    sentinel, which becomes ready when the parent process ends, then sends this
+    process SIGTERM (a ``setup`` still running cleans up, :func:`_start`) and ends
+    it after :data:`CLEAN_UP_S` if that has not."""
     parent = multiprocessing.parent_process()
     if parent is None:
         return
 
     def wait() -> None:
         multiprocessing.connection.wait([parent.sentinel])
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(CLEAN_UP_S)
         os._exit(1)
 
     threading.Thread(target=wait, name="end-with-parent", daemon=True).start()
@@ -165,7 +191,8 @@ class Pool:
 
     def close(self, terminate: bool = False) -> None:
         """Stop the workers - idle ones at once, busy ones after their item, or
-        at once with ``terminate`` -; later maps run here."""
+        at once with ``terminate`` (which waits for them to end) -; later maps
+        run here."""
         if self._executor is None:
             return
         processes = list((getattr(self._executor, "_processes", None) or {}).values())
@@ -174,6 +201,8 @@ class Pool:
         if terminate:
             for p in processes:
                 p.terminate()
+            for p in processes:  # one still setting up cleans up first (_start)
+                p.join(CLEAN_UP_S)
 
     def __enter__(self) -> "Pool":
         return self
