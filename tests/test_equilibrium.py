@@ -385,7 +385,8 @@ def test_every_blas_is_capped_however_late_it_loads():
 def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatch):
     """A lattice's Hessian (t_shape at level 4, 5336 DOFs: above the parallel
     threshold, in the reproducible mode) factorized by PARDISO on 1, 2 and 3
-    threads, in its own order or PARDISO's, solves to the same bits; a process
+    threads, in its own order or PARDISO's, solves to the same bits, one
+    right-hand side or several at once (a tendon robot's low-rank columns); a process
     factorizes a matrix above the threshold on its threads only while it has its
     cores to itself, and one below it on one thread, outside the mode."""
     import scipy.sparse as sp
@@ -400,7 +401,8 @@ def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatc
     H = DirectSolver(m).assemble_ordered().Hp
     n = H.shape[0]
     assert n >= pardiso.PARALLEL_MIN
-    b = np.random.default_rng(0).standard_normal(n)
+    rng = np.random.default_rng(0)
+    rhs = [rng.standard_normal(n), rng.standard_normal((n, 2)), rng.standard_normal((n, 3))]
     for reorder in (False, True):  # the pattern's order (a lattice's), PARDISO's own (a tendon robot's)
         solutions = []
         for threads in (1, 2, 3):
@@ -409,9 +411,10 @@ def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatc
             ldl.threads = threads
             assert ldl.factor(H.data) and ldl.factor(H.data)
             assert ldl.threads_used == (threads if pardiso.threaded() else 1)
-            solutions.append(ldl.solve(b))
-            assert np.linalg.norm(H @ solutions[-1] - b) <= 1e-10 * np.linalg.norm(b)
-        assert all(np.array_equal(solutions[0], y) for y in solutions[1:])
+            solutions.append([ldl.solve(b) for b in rhs])
+            for b, y in zip(rhs, solutions[-1]):
+                assert y.shape == b.shape and np.linalg.norm(H @ y - b) <= 1e-10 * np.linalg.norm(b)
+        assert all(np.array_equal(y0, y) for ys in solutions[1:] for y0, y in zip(solutions[0], ys))
 
     monkeypatch.setenv("TENDON_TAICHI_FACTOR_THREADS", "3")
     large = pardiso.PARALLEL_MIN
