@@ -33,7 +33,8 @@ about 1.7x faster on two. Its numbers do not depend on the threads: there
 PARDISO runs in its conditional numerical reproducibility mode (:data:`CNR`), in
 which the factors of t_shape's lattices at levels 4, 5 and 6 and of its tendon
 patterns in PARDISO's own order solve to the same bits on one, two and three
-threads, and whatever the mode's number. Without it they did on an AMD EPYC
+threads, and whatever the mode's number - one right-hand side at a time: several
+at once do not (:meth:`PardisoLDL.solve`). Without it they did on an AMD EPYC
 (MKL's AVX2 code), but not on an Intel Xeon (its AVX-512 code): a level-3
 lattice's solutions differed by about 1e-15 between one thread and two, so that
 ``optimize`` (the process's threads) and ``design`` (one) would not have made
