@@ -5,6 +5,7 @@ import json
 import os
 import shutil
 import signal
+import struct
 import subprocess
 import sys
 from pathlib import Path
@@ -276,12 +277,33 @@ def test_resume_refuses_another_resolution_solver_or_scene(tmp_path, cli, refere
     assert rec.read_bytes() == path.read_bytes() and sorted(tmp_path.iterdir()) == [rec, edited]
 
 
-def test_torn_last_frame_is_tolerated(reference, tmp_path, cli):
-    """A run killed while writing leaves a torn last frame: the complete part is read."""
+def frame_starts(data: bytes) -> list[int]:
+    """Where an .rrd's frames start (rerun's framing: a 12-byte "RRF2" stream header,
+    then frames of a 16-byte header - kind, length - and that many bytes), up to its
+    end-of-stream frame (kind 0)."""
+    off, starts = 12, []
+    while off + 16 <= len(data):
+        kind, length = struct.unpack_from("<QQ", data, off)
+        if kind == 0:
+            break
+        starts.append(off)
+        off += 16 + length
+    return starts
+
+
+@pytest.mark.parametrize("into", [8, 100])
+def test_torn_last_frame_is_tolerated(reference, tmp_path, cli, into):
+    """A run killed while writing leaves a torn last frame: the complete part is read,
+    and said to be torn - also where the tear is within the frame's 16-byte header,
+    which rerun's own reader takes for a clean end (the frame cut here is the one
+    three quarters into the file, ``into`` bytes from its start)."""
     path, _ = reference
     torn = tmp_path / "torn.rrd"
     data = path.read_bytes()
-    torn.write_bytes(data[: len(data) * 3 // 4])
+    starts = frame_starts(data)
+    i = max(i for i, o in enumerate(starts) if o <= len(data) * 3 // 4)
+    assert starts[i] + into < starts[i + 1]  # within that frame
+    torn.write_bytes(data[: starts[i] + into])
     r = cli("replay", torn, "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)

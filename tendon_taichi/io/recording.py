@@ -269,9 +269,11 @@ class RecordedRun:
                        Embedding(a["target_tri"].astype(np.int64), a["target_bary"]), a["target_goal"])
 
 
-def _complete_prefix(path: Path) -> int:
-    """Length of the longest prefix of an .rrd made of whole frames (a run killed
-    while writing leaves a torn last frame, which rerun's reader rejects)."""
+def _whole_frames(path: Path) -> tuple[int, bool]:
+    """The length of the longest prefix of an .rrd made of whole frames (a run killed
+    while writing leaves a torn last frame), and whether the file is whole: its
+    frames end at its end, or at the end-of-stream frame (kind 0) that a closed
+    recording writes before its footer."""
     with open(path, "rb") as fh:
         data = fh.read()
     off, good = 0, 0
@@ -283,24 +285,30 @@ def _complete_prefix(path: Path) -> int:
         if off + 16 > len(data):
             break
         kind, length = struct.unpack_from("<QQ", data, off)
-        if kind == 0 or off + 16 + length > len(data):
+        if kind == 0:
+            return good, True
+        if off + 16 + length > len(data):
             break
         off += 16 + length
         good = off
-    return good
+    return good, good == len(data)
 
 
 def read_chunks(path: Path):
-    """All chunks of the first recording store, tolerating a torn tail."""
+    """All chunks of the first recording store, tolerating a torn tail, and whether
+    it was torn. Rerun's reader rejects a tail torn within a frame but reads one
+    torn within a frame's 16-byte header as a clean end, so the frames are checked
+    here too."""
     from rerun.chunk import RrdReader
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            return list(RrdReader(path).stream()), False
+            chunks = list(RrdReader(path).stream())
+            return chunks, not _whole_frames(path)[1]
         except (RuntimeError, ValueError, OSError):
             pass
-        n = _complete_prefix(path)
+        n = _whole_frames(path)[0]
         if n <= 12:
             raise RecordingError(f"'{path}' is not a readable rerun recording")
         fd, tmp = tempfile.mkstemp(suffix=".rrd")
