@@ -279,14 +279,14 @@ def test_resume_refuses_another_resolution_solver_or_scene(tmp_path, cli, refere
 
 def frame_starts(data: bytes) -> list[int]:
     """Where an .rrd's frames start (rerun's framing: a 12-byte "RRF2" stream header,
-    then frames of a 16-byte header - kind, length - and that many bytes), up to its
-    end-of-stream frame (kind 0)."""
+    then frames of a 16-byte header - kind, length - and that many bytes), up to and
+    with its end-of-stream frame (kind 0), which the file's footer follows."""
     off, starts = 12, []
     while off + 16 <= len(data):
         kind, length = struct.unpack_from("<QQ", data, off)
+        starts.append(off)
         if kind == 0:
             break
-        starts.append(off)
         off += 16 + length
     return starts
 
