@@ -15,6 +15,9 @@ ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "benchmarks"
 #: a short optimization that still ends sparse (a dense pattern would make consolidation slow)
 TINY = ("--set", "stage_iterations=30", "--beam", 1, "--no-converge")
+#: the side-by-side scripts' design options (after SCENE LEVEL): short, one extractor, one round, beam 1
+SHORT_DESIGN = ("--stage-iterations", 25, "--k-min", 0.1, "--extractors", "strands", "--refine", 1, "--beam", 1,
+                "--no-converge")
 
 
 def run(script: Path, *args, cwd=None, timeout=900):
@@ -55,8 +58,7 @@ def test_scene_args_splits_scene_level_flags_and_repeat():
 
 
 def test_realizable_side_by_side_solves_each_robot_both_ways():
-    out = run(BENCH / "realizable_side_by_side.py", "finger", 1, "--stage-iterations", 25, "--k-min", 0.1,
-              "--extractors", "strands", "--refine", 1, "--beam", 1, "--no-converge").stdout.splitlines()[-4:]
+    out = run(BENCH / "realizable_side_by_side.py", "finger", 1, *SHORT_DESIGN).stdout.splitlines()[-4:]
     assert int(out[0].split()[2]) > 0 and out[0].startswith("realizable solves:")
     assert out[1].startswith("Gauss-Newton worse by > 1e-07 L:")
     lbfgsb, gn = (int(ln.split()[-4]) for ln in out[2:4])
@@ -64,8 +66,7 @@ def test_realizable_side_by_side_solves_each_robot_both_ways():
 
 
 def test_routes_side_by_side_runs_each_route_optimization_both_ways():
-    out = run(BENCH / "routes_side_by_side.py", "t_shape", 1, "--stage-iterations", 25, "--k-min", 0.1,
-              "--extractors", "strands", "--refine", 1, "--beam", 1, "--no-converge").stdout.splitlines()[-4:]
+    out = run(BENCH / "routes_side_by_side.py", "t_shape", 1, *SHORT_DESIGN).stdout.splitlines()[-4:]
     assert out[0].startswith("route optimizations:") and int(out[0].split()[2]) > 0
     assert out[1].startswith("SLSQP lower:")
     (old, new) = (int(ln.split(": ")[1].split()[0]) for ln in out[2:4])
@@ -73,9 +74,7 @@ def test_routes_side_by_side_runs_each_route_optimization_both_ways():
 
 
 def test_route_gradients_runs_every_route_optimization_both_ways():
-    out = run(BENCH / "route_gradients.py", "t_shape", 1, "--stage-iterations", 25, "--k-min", 0.1,
-              "--extractors", "strands", "--refine", 1, "--beam", 1, "--no-converge",
-              "--repeat", 1).stdout.splitlines()[-4:]
+    out = run(BENCH / "route_gradients.py", "t_shape", 1, *SHORT_DESIGN, "--repeat", 1).stdout.splitlines()[-4:]
     assert out[0].startswith("route optimizations:") and int(out[0].split()[2]) > 0
     assert out[1].startswith("gradient at every point:") and out[2].startswith("gradient where SLSQP asks:")
     (every_points, every_adjoints), (points, adjoints) = (
@@ -95,9 +94,7 @@ def test_secant_replay_solves_the_same_evaluations_both_ways():
 
 
 def test_route_replay_runs_every_route_optimization_both_ways():
-    out = run(BENCH / "route_replay.py", "t_shape", 1, "--stage-iterations", 25, "--k-min", 0.1,
-              "--extractors", "strands", "--refine", 1, "--beam", 1, "--no-converge",
-              "--repeat", 1).stdout.splitlines()[-4:]
+    out = run(BENCH / "route_replay.py", "t_shape", 1, *SHORT_DESIGN, "--repeat", 1).stdout.splitlines()[-4:]
     assert out[0].startswith("route optimizations:") and int(out[0].split()[2]) > 0
     assert out[1].startswith("every pattern made anew:") and out[2].startswith("detached segments:")
     assert all(int(ln.split(", ")[1].split()[0]) > 0 for ln in out[1:3])  # evaluations
@@ -106,8 +103,7 @@ def test_route_replay_runs_every_route_optimization_both_ways():
 
 
 def test_extension_screen_finishes_every_extension_in_full_too():
-    out = run(BENCH / "extension_screen.py", "t_shape", 1, "--stage-iterations", 25, "--k-min", 0.1,
-              "--extractors", "strands", "--refine", 1, "--beam", 1, "--no-converge").stdout.splitlines()[-5:]
+    out = run(BENCH / "extension_screen.py", "t_shape", 1, *SHORT_DESIGN).stdout.splitlines()[-5:]
     assert out[0].startswith("extensions:")
     tried, layouts = int(out[0].split()[1]), int(out[0].split()[3])
     assert tried >= layouts > 0
