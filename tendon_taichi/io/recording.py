@@ -273,25 +273,27 @@ def _whole_frames(path: Path) -> tuple[int, bool]:
     """The length of the longest prefix of an .rrd made of whole frames (a run killed
     while writing leaves a torn last frame), and whether the file is whole: its
     frames end at its end, or at the end-of-stream frame (kind 0) that a closed
-    recording writes before its footer."""
-    with open(path, "rb") as fh:
-        data = fh.read()
+    recording writes before its footer. Reads the frames' headers only."""
+    size = path.stat().st_size
     off, good = 0, 0
-    while off + 12 <= len(data):
-        if data[off:off + 4] == b"RRF2":
-            off += 12
+    with open(path, "rb") as fh:
+        while off + 12 <= size:
+            fh.seek(off)
+            head = fh.read(16)
+            if head[:4] == b"RRF2":
+                off += 12
+                good = off
+                continue
+            if off + 16 > size:
+                break
+            kind, length = struct.unpack("<QQ", head)
+            if kind == 0:
+                return good, True
+            if off + 16 + length > size:
+                break
+            off += 16 + length
             good = off
-            continue
-        if off + 16 > len(data):
-            break
-        kind, length = struct.unpack_from("<QQ", data, off)
-        if kind == 0:
-            return good, True
-        if off + 16 + length > len(data):
-            break
-        off += 16 + length
-        good = off
-    return good, good == len(data)
+    return good, good == size
 
 
 def read_chunks(path: Path):
