@@ -88,6 +88,7 @@ if __name__ == "__main__":
 
 
 def wait_for(condition, seconds: float) -> bool:
+    """Whether ``condition()`` holds within ``seconds`` (polled every 0.1 s)."""
     deadline = time.monotonic() + seconds
     while not condition() and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -167,17 +168,12 @@ def test_a_worker_ends_when_the_job_that_started_it_is_killed(tmp_path, sig):
     clean-up; its worker must not go on computing for no one."""
     (tmp_path / "job.py").write_text(PARENT.format(tests=str(Path(__file__).parent), folder=str(tmp_path)))
     job = subprocess.Popen([sys.executable, str(tmp_path / "job.py")], stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 60
-    while len(list(tmp_path.glob("*.pid"))) < 2 and time.monotonic() < deadline:  # both took their item
-        time.sleep(0.1)
+    wait_for(lambda: len(list(tmp_path.glob("*.pid"))) >= 2, 60)  # both took their item
     workers = [int(f.stem) for f in tmp_path.glob("*.pid") if int(f.stem) != job.pid]
     assert len(workers) == 1 and running(workers[0])
     job.send_signal(sig)
     job.wait(timeout=30)
-    deadline = time.monotonic() + 20
-    while running(workers[0]) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert not running(workers[0])
+    assert wait_for(lambda: not running(workers[0]), 20)
 
 
 def test_a_worker_stopped_while_it_sets_up_cleans_up_after_itself(tmp_path):
