@@ -145,8 +145,10 @@ def page(result: dict, lines: list[str], plot: str) -> str:
         f"![bench]({plot})", "",
         "The whole design pipeline per level (`optimize`, its regularized optimization; `design`, all of it -",
         "the optimization, every extractor with consolidation and route optimization, the front re-solved",
-        "on the next finer mesh; `recording`, the size of its `run.rrd`; extractor columns: tendons /",
-        "realizable pose error in % of L / kinks):",
+        "on the next finer mesh - in one process, with no worker processes: `tendon-taichi design` shares",
+        "the consolidations and the front's search with worker processes by default (`--workers`), which",
+        "takes less wall time where cores are spare; `recording`, the size of its `run.rrd`; extractor",
+        "columns: tendons / realizable pose error in % of L / kinks):",
         "", *quality_table(result), "", *alone])
 
 
