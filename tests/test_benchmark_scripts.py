@@ -328,13 +328,21 @@ def test_the_hostile_input_table_runs_a_case_and_writes_its_row(tmp_path):
 
 def test_versus_commit_times_both_pipelines(tmp_path):
     """With this environment standing in for the earlier commit's (its optimize and
-    compare), the script times both pipelines per level and writes the ratio."""
+    compare), the script times both pipelines per level, twice with ``--repeat 2``,
+    and writes each run's ratio and their median."""
     venv = Path(sys.executable).parent.parent
     if not (venv / "bin" / "tendon-taichi").exists():
         pytest.skip("the interpreter is not in a virtual environment with tendon-taichi installed")
-    out = run(BENCH / "bench" / "versus_commit.py", venv, "--levels", 1, "--tiny", "--out", tmp_path,
+    out = run(BENCH / "bench" / "versus_commit.py", venv, "--levels", 1, "--repeat", 2, "--tiny", "--out", tmp_path,
               "--json", tmp_path / "v.json")
     row = json.loads((tmp_path / "v.json").read_text())["levels"][0]
-    assert row["level"] == 1 and row["old_s"] == pytest.approx(row["old_optimize_s"] + row["old_compare_s"])
-    assert row["speedup"] == pytest.approx(row["old_s"] / row["design_s"])
-    assert (tmp_path / "design-r1" / "design.json").exists() and "old / new" in out.stdout
+    assert row["level"] == 1 and len(row["runs"]) == 2
+    for r in row["runs"]:
+        assert r["old_s"] == pytest.approx(r["old_optimize_s"] + r["old_compare_s"])
+        assert r["speedup"] == pytest.approx(r["old_s"] / r["design_s"])
+    ratios = sorted(r["speedup"] for r in row["runs"])
+    assert row["speedup"] == pytest.approx(sum(ratios) / 2) and [row["speedup_min"], row["speedup_max"]] == ratios
+    assert row["design_s"] == pytest.approx(sum(r["design_s"] for r in row["runs"]) / 2)
+    for folder in ("design-r1", "design-r1-2"):
+        assert (tmp_path / folder / "design.json").exists()
+    assert "old / new" in out.stdout and "median of 2 runs" in out.stdout
