@@ -17,10 +17,10 @@ Per level the old pipeline runs first, then this checkout's ``design`` (the
 ``tendon-taichi`` of the interpreter running this script), each in its own
 process; wall times in seconds, the ratio old / new, on stdout (and as JSON).
 ``--repeat N`` (default 1) runs that pair N times per level, one after the
-other: the figures are then the medians over the N runs (the ratio the median
-of the runs' own ratios, with its lowest and highest), and the JSON keeps each
-run too - on a shared machine the ratio moves by several percent from run to
-run.
+other: each figure is then its own median over the N runs (so the old
+pipeline's two parts need not add up to its whole; the ratio is the median of
+the runs' own ratios, with its lowest and highest), and the JSON keeps each run
+too - on a shared machine the ratio moves by several percent from run to run.
 ``--tiny`` (for the tests) runs 30 iterations per stage and no consolidation in
 both, and ``design`` on the design mesh alone: no measurement.
 """
