@@ -347,12 +347,15 @@ def test_a_route_cut_short_is_carried_on_along_its_tangent(searched):
 def test_worker_processes_find_the_same_front(searched):
     """With a worker process sharing the finishes, the extensions, the finer
     mesh's solves and its route optimizations (route optimization on: one round),
-    the front, every finished layout, the routes optimized again on the finer
-    mesh and the errors there are those found in one process, to the last bit."""
+    and solving each finished layout on the finer mesh as the front finishes it
+    (as ``design`` does, :class:`FineSolves`), the front, every finished layout,
+    the routes optimized again on the finer mesh and the errors there are those
+    found in one process, to the last bit."""
     import copy
     from dataclasses import replace
 
     from tendon_taichi import build_problem
+    from tendon_taichi.extract.converge import FineSolves
     from tendon_taichi.tasks.pool import Pool
 
     p, st, greedy, _ = searched
@@ -360,15 +363,24 @@ def test_worker_processes_find_the_same_front(searched):
     fine = replace(build_problem(p.scene, 2), target_goal=p.target_goal)
 
     def run(workers):
-        front = search_front(p, st, p.scene.optimize, greedy, options, "direct", workers=workers)
-        converged = copy.deepcopy(front)
-        res = converge_front(converged, p, st, fine, p.scene.optimize, options, "direct", workers=workers)
-        return front, (converged, res)
+        solved = FineSolves(fine, p.scene.optimize, "direct", workers)
+        front = search_front(p, st, p.scene.optimize, greedy, options, "direct", workers=workers,
+                             on_finished=solved.offer)
+        assert front.on_finished is None  # only while the search runs
+        searched = copy.deepcopy(front)  # converging changes the front in place: it goes on with the same layouts
+        finished = [lay for held in front.finished.values() for lay in held]
+        early = [solved._started[id(lay)][1] for lay in finished if id(lay) in solved._started]
+        res = converge_front(front, p, st, fine, p.scene.optimize, options, "direct", workers=workers, solved=solved)
+        return searched, (front, res), (early, finished)
 
-    alone, (alone_converged, alone_fine) = run(None)
+    alone, (alone_converged, alone_fine), (none_early, _) = run(None)
+    assert none_early == []  # without workers nothing starts early
     with Pool(1) as pool:
-        shared, (shared_converged, shared_fine) = run(pool)
+        shared, (shared_converged, shared_fine), (early, finished) = run(pool)
         assert pool.broken is None
+    # every finished layout was handed out as it was found, and some were solved before the front was done
+    assert len(early) == len(finished) > 0
+    assert any(job.future is not None for job in early)
     assert alone_converged.refit and shared_converged.refit == alone_converged.refit  # optimized again there
     for k in alone_converged.layouts:
         a, b = alone_converged.layouts[k], shared_converged.layouts[k]

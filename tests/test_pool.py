@@ -2,7 +2,9 @@
 same calls give in this process, in order, with the work shared between the
 workers and this process; a worker that dies or a set-up that fails leaves
 the results complete (run here) and says so; an error a task raises reaches
-the caller; with no workers nothing is started."""
+the caller; with no workers nothing is started. Deferred jobs run on a worker
+that has no map item to take, and collecting them gives what the same calls
+give here, whichever process ran them and whether one ran them at all."""
 
 import os
 import signal
@@ -197,3 +199,57 @@ def test_a_worker_whose_job_is_killed_while_it_sets_up_cleans_up_after_itself(tm
     job.send_signal(sig)
     job.wait(timeout=30)
     assert wait_for(lambda: [p.name for p in tmp_path.iterdir()] == ["job.py"], 20), list(tmp_path.iterdir())
+
+
+def slow_square(x: int) -> tuple[int, int]:
+    time.sleep(0.2)
+    return x * x, os.getpid()
+
+
+def test_deferred_jobs_run_on_an_idle_worker_and_are_collected_in_order():
+    with Pool(1) as pool:
+        jobs = [pool.defer(square, x) for x in range(5)]
+        assert wait_for(lambda: all(job.future is not None and job.future.done() for job in jobs), 60)
+        got = pool.collect(jobs)
+        assert [v for v, _ in got] == [x * x for x in range(5)]
+        assert {pid for _, pid in got} != {os.getpid()}  # the idle worker took them
+        assert pool.collect([]) == []
+
+
+def test_deferred_jobs_wait_for_a_maps_items_and_the_rest_are_shared_when_collected():
+    """A map started while jobs are queued hands its items out first; the jobs a
+    worker has not taken when they are collected run as a map, here and on the
+    worker; everything gives what the calls give here."""
+    with Pool(1) as pool:
+        assert wait_for(lambda: all(f.done() for f in pool._starting), 60)
+        jobs = [pool.defer(slow_square, x) for x in range(8)]
+        assert [v for v, _ in pool.map(square, range(6))] == [x * x for x in range(6)]
+        more = [pool.defer(square, x) for x in range(8, 10)]
+        got = pool.collect(jobs + more)
+        assert [v for v, _ in got] == [x * x for x in range(10)]
+        assert os.getpid() in {pid for _, pid in got}  # not all taken by the worker before collect
+        assert pool.broken is None
+
+
+def test_deferred_jobs_without_workers_run_here_when_collected():
+    pool = Pool(0)
+    jobs = [pool.defer(square, x) for x in range(3)]
+    assert all(job.future is None for job in jobs)
+    assert pool.collect(jobs) == [(x * x, os.getpid()) for x in range(3)]
+
+
+def test_a_worker_that_dies_in_a_deferred_job_leaves_the_results_complete(monkeypatch):
+    monkeypatch.setenv("POOL_TEST_PARENT", str(os.getpid()))
+    with Pool(1) as pool:
+        jobs = [pool.defer(die_in_a_worker, x) for x in range(4)]
+        assert wait_for(lambda: jobs[0].future is not None and jobs[0].future.done(), 60)
+        assert pool.collect(jobs) == [0, -1, -2, -3]
+        assert pool.broken and "worker process stopped" in pool.broken
+        assert pool.map(square, [1, 2]) == [(1, os.getpid()), (4, os.getpid())]  # broken: all here
+
+
+def test_an_error_a_deferred_job_raises_reaches_the_collector():
+    with Pool(1) as pool:
+        jobs = [pool.defer(fail, x) for x in range(4)]
+        with pytest.raises(ValueError, match="two is bad"):
+            pool.collect(jobs)

@@ -26,7 +26,7 @@ from ..body.problem import build_problem
 from ..body.scene import Scene
 from ..errors import InputError, TendonError
 from ..extract.consolidation import Layout
-from ..extract.converge import converge_front
+from ..extract.converge import FineSolves, converge_front
 from ..extract.front import Front, search_front
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.realizable import as_built_arrays
@@ -264,12 +264,13 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
     if prior is not None:
         priors = prior_layouts(prior, problem)
         log(f"{len(priors)} of the {len(prior.layouts)} layouts of '{prior.path}' join the front's seeds")
+    finer = FinerMesh(problem, ex.run.settings, solver, workers) if converge else None
     front = search_front(problem, ex.state, ex.run.settings, done, cons, solver, max_tendons, beam, log, workers,
-                         priors)
+                         priors, None if finer is None else finer.offer)
     if not front.layouts:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)" if max_tendons
                          else "no extractor's tendons make a layout of one tendon or more" + _pattern_said(ex))
-    fine = finer_mesh_errors(ex, front, cons, solver, log, workers) if converge else None
+    fine = finer_mesh_errors(ex, front, cons, solver, log, workers, finer) if converge else None
     rows = front_rows(front, fine, ms.mu, ms.kink_angle)
     chosen = recommend(rows, budget, max_tendons, min_capstan)
     layout = front.layouts[chosen["count"]]
@@ -302,24 +303,50 @@ def _budget_warning(summary: dict) -> list[str]:
             f"one is the most accurate, {100 * error:.2f}% of L as built"]
 
 
+class FinerMesh:
+    """The next finer mesh (level + 1) of ``problem``'s body, built before the front
+    is searched, and the solves there of the layouts the front finishes, started
+    as they are (:meth:`offer`: ``workers`` run them while they have nothing else
+    to do, :class:`~tendon_taichi.extract.converge.FineSolves`); ``error`` where
+    that mesh could not be built (too large for this machine, or its scene file is
+    gone), ``build_s`` the seconds its building took."""
+
+    def __init__(self, problem, settings, solver: str, workers: Pool | None):
+        t0 = time.perf_counter()
+        self.level = problem.level + 1
+        self.error: str | None = None
+        self.solves: FineSolves | None = None
+        try:
+            self.solves = FineSolves(build_problem(problem.scene, self.level), settings, solver, workers)
+        except TendonError as exc:
+            self.error = str(exc)
+        self.build_s = time.perf_counter() - t0
+
+    def offer(self, layout: Layout) -> None:
+        """Start solving a layout the front finished on this mesh."""
+        if self.solves is not None:
+            self.solves.offer(layout)
+
+
 def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings, solver: str, log,
-                      workers: Pool | None = None) -> dict:
-    """The front's layouts solved on the next finer mesh (level + 1), kept monotone
-    there (:func:`converge_front`): ``resolution``, ``results`` (per count its
-    as-built robot there, None where it could not be solved), ``time_s``, and
-    ``error`` when that mesh could not be built (too large for this machine, or its
-    scene file is gone)."""
+                      workers: Pool | None = None, finer: FinerMesh | None = None) -> dict:
+    """The front's layouts solved on the next finer mesh (level + 1; ``finer``, where
+    it was built before the front was searched), kept monotone there
+    (:func:`converge_front`): ``resolution``, ``results`` (per count its as-built
+    robot there, None where it could not be solved), ``time_s`` (from here on, and
+    the mesh's building), and ``error`` when that mesh could not be built (too
+    large for this machine, or its scene file is gone)."""
     t0 = time.perf_counter()
     level = ex.problem.level + 1
     out = {"resolution": level, "results": {}, "time_s": 0.0}
     log(f"re-solving the front on the level-{level} mesh")
-    try:
-        fine = build_problem(ex.problem.scene, level)
-    except TendonError as exc:
-        log(f"the level-{level} mesh was not built ({exc}); the front's errors are at level {level - 1}")
-        return {**out, "error": str(exc), "time_s": time.perf_counter() - t0}
-    out["results"] = converge_front(front, ex.problem, ex.state, fine, ex.run.settings, cons, solver, log, workers)
-    out["time_s"] = time.perf_counter() - t0
+    finer = finer or FinerMesh(ex.problem, ex.run.settings, solver, workers)
+    if finer.solves is None:
+        log(f"the level-{level} mesh was not built ({finer.error}); the front's errors are at level {level - 1}")
+        return {**out, "error": finer.error, "time_s": time.perf_counter() - t0 + finer.build_s}
+    out["results"] = converge_front(front, ex.problem, ex.state, finer.solves.fine, ex.run.settings, cons, solver, log,
+                                    workers, finer.solves)
+    out["time_s"] = time.perf_counter() - t0 + finer.build_s
     return out
 
 

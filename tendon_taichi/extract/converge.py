@@ -16,7 +16,7 @@ import numpy as np
 from ..body.problem import Problem
 from ..errors import ConvergenceError
 from ..objective.settings import OptimizeSettings
-from ..tasks.pool import Pool
+from ..tasks.pool import Deferred, Pool
 from .consolidation import Consolidation, Layout, _Search, _solve_task, route_settings
 from .front import PRECISION, Front, _key, _with_one_more
 from .protocol import IdealizedState
@@ -42,9 +42,43 @@ def converged_error(fine: Problem, layout: Layout, state: IdealizedState, settin
     return solve_realizable_poses(fine, layout.tendons(), state, settings, solver, start)
 
 
+class FineSolves:
+    """The as-built robots on the finer mesh ``fine`` (:func:`converged_error` from
+    each layout's own contractions) of the layouts the front finishes, started as
+    the front offers them (:meth:`offer`, the front's ``on_finished``): ``workers``
+    run them while they have nothing else to do (:meth:`~tendon_taichi.tasks.pool.Pool.defer`),
+    and :func:`converge_front` collects them (:meth:`results`); the rest are solved
+    there. Without workers nothing starts early. The results are those solved later."""
+
+    def __init__(self, fine: Problem, settings: OptimizeSettings, solver: str = "auto", workers: Pool | None = None):
+        self.fine, self.state = fine, pose_only_state(fine)
+        self.task = partial(_fine_task, (fine, self.state, settings, solver))
+        self.workers = workers
+        self._started: dict[int, tuple[Layout, Deferred]] = {}  # by id(layout); the layout keeps its id
+
+    def offer(self, layout: Layout) -> None:
+        """Start solving ``layout`` on the finer mesh when a worker is free."""
+        if self.workers is not None and self.workers.active and id(layout) not in self._started:
+            self._started[id(layout)] = (layout, self.workers.defer(self.task, (layout, None)))
+
+    def results(self, layouts: list[Layout]) -> list[RealizableResult | None]:
+        """Each of ``layouts`` solved on the finer mesh (None where it cannot be), in
+        order: those started collected, the others solved now (on the workers too)."""
+        started = [self._started[id(lay)][1] for lay in layouts if id(lay) in self._started]
+        fresh = [(lay, None) for lay in layouts if id(lay) not in self._started]
+        got = iter(self.workers.collect(started) if started else [])
+        new = iter(_mapped(self.workers, self.task, fresh))
+        return [next(got) if id(lay) in self._started else next(new) for lay in layouts]
+
+
+def _mapped(workers: Pool | None, task: Callable, jobs: list) -> list:
+    """``[task(job) for job in jobs]``, shared with ``workers`` where there are any."""
+    return workers.map(task, jobs) if workers is not None else [task(job) for job in jobs]
+
+
 def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: Problem, settings: OptimizeSettings,
                    options: ConsolidationSettings, solver: str = "auto", log: Callable[[str], None] | None = None,
-                   workers: Pool | None = None) -> dict[int, RealizableResult | None]:
+                   workers: Pool | None = None, solved: FineSolves | None = None) -> dict[int, RealizableResult | None]:
     """Each count's layouts on the finer mesh ``fine`` (:func:`converged_error`; None
     where none can be solved), in place: of the layout held and every other one
     finished for that count (``front.finished``), the least costly there (its pose
@@ -55,26 +89,29 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
     route (the best on ``problem``'s mesh from each start, :func:`_with_one_more`,
     where that keeps the front on ``problem``'s mesh monotone) is solved on
     ``fine`` as well and replaces the front's layout when it does better there.
-    ``workers`` share the solves of the finished layouts and the refits."""
-    fine_state = pose_only_state(fine)
+    ``workers`` share the solves of the finished layouts and the refits; ``solved``
+    (made with ``fine``) holds those of the finished layouts started while the
+    front was searched."""
+    solved = solved or FineSolves(fine, settings, solver, workers)
+    fine_state = solved.state
     search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
     search.out = Consolidation(next(iter(front.layouts.values())), 0, 0.0)
     search.workers = workers
     size = problem.size
-    task = partial(_fine_task, (fine, fine_state, settings, solver))
-    there = _least_costly_there(search, front, task)
+    task = solved.task
+    there = _least_costly_there(search, front, solved)
     _refit(search, front, there, fine, fine_state)
     out: dict[int, RealizableResult | None] = {}
     for k in sorted(front.layouts):
         res, below = there[k], out.get(k - 1)
         if below is not None and (res is None or res.pose_error_rel > below.pose_error_rel + PRECISION):
             smaller = front.layouts[k - 1]
-            for lay in [m for m in _with_one_more(search, smaller, front.routes, size)
-                        if m.error <= max(smaller.error, front.layouts[k].error) + PRECISION]:
-                start = np.concatenate([np.atleast_2d(below.ratios).reshape(fine.n_poses, -1),
-                                        np.atleast_2d(lay.realizable.ratios).reshape(fine.n_poses, -1)[:, -1:]],
-                                       axis=1)
-                more = task((lay, start))
+            more_layouts = [m for m in _with_one_more(search, smaller, front.routes, size)
+                            if m.error <= max(smaller.error, front.layouts[k].error) + PRECISION]
+            starts = [np.concatenate([np.atleast_2d(below.ratios).reshape(fine.n_poses, -1),
+                                      np.atleast_2d(lay.realizable.ratios).reshape(fine.n_poses, -1)[:, -1:]], axis=1)
+                      for lay in more_layouts]
+            for lay, more in zip(more_layouts, _mapped(workers, task, list(zip(more_layouts, starts)))):
                 if more is not None and (res is None or more.pose_error_rel < res.pose_error_rel):
                     front.layouts[k], res = lay, more
         out[k] = res
@@ -85,29 +122,27 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
     return out
 
 
-def _least_costly_there(search: _Search, front: Front, task: Callable) -> dict[int, RealizableResult | None]:
+def _least_costly_there(search: _Search, front: Front, solved: FineSolves) -> dict[int, RealizableResult | None]:
     """Per count, of the layout held and every other one finished for it, the least
-    costly on the finer mesh (``task``: :func:`_fine_task` with that mesh; the one
-    held on ties) made the count's, in place, and its as-built robot there (None
-    where none can be solved); the search's workers share the solves."""
+    costly on the finer mesh (``solved``; the one held on ties) made the count's, in
+    place, and its as-built robot there (None where none can be solved); the
+    search's workers share the solves not started yet."""
     size = search.problem.size
     choices = {}
     for k in sorted(front.layouts):
         key = _key(front.layouts[k], size)
         choices[k] = [front.layouts[k]] + [m for m in front.finished.get(k, []) if _key(m, size) != key]
-    jobs = [(lay, None) for k in sorted(choices) for lay in choices[k]]
+    jobs = [lay for k in sorted(choices) for lay in choices[k]]
     if len(jobs) > len(choices):
         search.log(f"front: the {len(jobs)} finished layouts on the finer mesh")
-    workers = search.workers
-    found = workers.map(task, jobs) if workers is not None else [task(job) for job in jobs]
-    solved = {id(lay): res for (lay, _), res in zip(jobs, found)}
+    found = dict(zip(map(id, jobs), solved.results(jobs)))
     there: dict[int, RealizableResult | None] = {}
     for k in sorted(front.layouts):
         held, others = choices[k][0], choices[k][1:]
-        res = solved[id(held)]
+        res = found[id(held)]
         best = np.inf if res is None else search.cost(held.routes, res.pose_error_rel)
         for lay in others:
-            got = solved[id(lay)]
+            got = found[id(lay)]
             cost = np.inf if got is None else search.cost(lay.routes, got.pose_error_rel)
             if cost < best - PRECISION ** 2:
                 front.layouts[k], res, best = lay, got, cost

@@ -141,7 +141,9 @@ class Front:
     candidates screened, ``route_evaluations`` equilibria of route optimization in
     ``route_s`` seconds, ``time_s`` in all; ``priors`` of the seeds came from
     a prior design (:class:`PriorLayout`); ``refit``: the counts whose routes the
-    finer mesh optimized again (:func:`~.converge.converge_front`)."""
+    finer mesh optimized again (:func:`~.converge.converge_front`); ``on_finished``,
+    while :func:`search_front` runs, is called with each distinct layout as it
+    joins ``finished``."""
 
     layouts: dict[int, Layout] = field(default_factory=dict)
     finished: dict[int, list[Layout]] = field(default_factory=dict)
@@ -155,6 +157,7 @@ class Front:
     time_s: float = 0.0
     priors: int = 0
     refit: list[int] = field(default_factory=list)
+    on_finished: Callable[[Layout], None] | None = field(default=None, repr=False, compare=False)
 
     def offer(self, layouts: list[Layout], size: float) -> None:
         """Keep ``layouts`` among the finished of their counts, each distinct one once."""
@@ -162,6 +165,8 @@ class Front:
             held = self.finished.setdefault(lay.count, [])
             if _key(lay, size) not in {_key(h, size) for h in held}:
                 held.append(lay)
+                if self.on_finished is not None:
+                    self.on_finished(lay)
 
     def as_json(self) -> dict:
         return {"counts": sorted(self.layouts), "seeds": self.seeds, "priors": self.priors, "pool": self.pool,
@@ -215,13 +220,16 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
                  consolidations: list[Consolidation], options: ConsolidationSettings, solver: str = "auto",
                  max_tendons: int | None = None, beam: int = BEAM,
                  log: Callable[[str], None] | None = None, workers: Pool | None = None,
-                 priors: list[PriorLayout] | None = None) -> Front:
+                 priors: list[PriorLayout] | None = None,
+                 on_finished: Callable[[Layout], None] | None = None) -> Front:
     """The front (module docstring) from the extractors' ``consolidations`` and the
     ``priors`` (layouts from a prior design): per count 1 .. the most any seed has
     (at most ``max_tendons``), the best layout found, finished. With consolidation off
     (``options.enabled`` false), the seeds as they are, no search. ``workers``, a
     pool of worker processes, share the independent solves and route
-    optimizations (the same front as without them)."""
+    optimizations (the same front as without them); ``on_finished`` is called with
+    each layout as it is finished (``Front.on_finished``: ``design`` starts solving
+    it on the finer mesh, :class:`~.converge.FineSolves`)."""
     t0 = time.perf_counter()
     say = log or (lambda text: None)
     wide = replace(options, gap=max(options.gap, JOIN_GAP))
@@ -242,14 +250,14 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
     if pooled is not None:
         by_count.setdefault(pooled.count, []).append(pooled)
     front = Front(seeds=sum(len(v) for v in by_count.values()) + len(prior), pool=len(pool), routes=pool,
-                  priors=len(prior))
+                  priors=len(prior), on_finished=on_finished)
     if not options.enabled:
         for lay in prior:
             by_count.setdefault(lay.count, []).append(lay)
     if not by_count or not options.enabled:  # nothing to search, or the fitted routes as they are
         front.layouts = {k: _best(v, 1, size)[0] for k, v in sorted(by_count.items())
                          if max_tendons is None or k <= max_tendons}
-        front.time_s = time.perf_counter() - t0
+        front.time_s, front.on_finished = time.perf_counter() - t0, None
         return front
     top = max(by_count)
     say(f"front: beam search from {top} tendon(s), {front.seeds} seed layouts"
@@ -305,7 +313,7 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
     _descend(search, front, pool, size, say)
     front.evaluations, front.screened = tally.evaluations, tally.screened
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
-    front.time_s = time.perf_counter() - t0
+    front.time_s, front.on_finished = time.perf_counter() - t0, None
     return front
 
 

@@ -15,6 +15,15 @@ argument: which process ran an item does not change what it gives. ``fn``
 and the items are pickled in the calling thread as the map starts, not by
 the executor's own thread while this process computes with the same objects.
 
+:meth:`Pool.defer` queues a job whose result is wanted later (``design``: each
+layout the front finishes, solved on the finer mesh): a worker that has no
+item of a map to take runs the queued jobs meanwhile - between maps, while
+this process computes alone, and at a map's end -, and :meth:`Pool.collect`
+returns their results, the jobs no worker took shared between the workers and
+this process like a map's items. A map's items go first: a worker takes a
+queued job only when the running map has none left to hand out. The results
+are those of the calls made here.
+
 With ``workers = 0`` everything runs in this process. A worker that dies (its
 process killed, out of memory) or a ``setup`` that fails (the worker then ends
 quietly) breaks the pool: the items it had are run again here and the pool
@@ -39,7 +48,8 @@ import pickle
 import signal
 import threading
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+from collections import deque
+from concurrent.futures import CancelledError, Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Iterable
 
@@ -107,6 +117,33 @@ def _end_with_parent() -> None:
     threading.Thread(target=wait, name="end-with-parent", daemon=True).start()
 
 
+class Deferred:
+    """A job queued by :meth:`Pool.defer`: ``fn(item)``, both pickled as it was
+    queued; ``future`` once a worker took it."""
+
+    def __init__(self, fn: Callable[[Any], Any], item: Any, fn_pickled: bytes):
+        self.fn, self.item = fn, item
+        self.fn_pickled = fn_pickled
+        self.item_pickled = pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL)
+        self.future: Future | None = None
+
+
+class _Items:
+    """A running map's items as the workers are handed them: the next one not taken
+    (:meth:`take`) and the futures of those handed out, by index."""
+
+    def __init__(self, fn_pickled: bytes, pickled: list[bytes]):
+        self.fn_pickled, self.pickled = fn_pickled, pickled
+        self.taken = 0
+        self.futures: dict[int, Future] = {}
+
+    def take(self) -> int | None:
+        if self.taken == len(self.pickled):
+            return None
+        self.taken += 1
+        return self.taken - 1
+
+
 class Pool:
     """``workers`` worker processes, each running ``setup(*setup_args)`` first
     (module docstring); a context manager that stops them on leaving."""
@@ -117,6 +154,12 @@ class Pool:
         self.workers = workers
         self.broken: str | None = None
         self._executor: ProcessPoolExecutor | None = None
+        # the hand-out (_hand_out) runs in this thread and in the executor's, as tasks end
+        self._lock = threading.RLock()
+        self._busy = 0  # tasks handed to the workers and not ended: at most one per worker
+        self._items: _Items | None = None  # the running map's
+        self._queued: deque[Deferred] = deque()  # deferred jobs no worker has taken
+        self._pickled: tuple[Any, bytes] | None = None  # the last deferred function, pickled
         if workers:
             self._executor = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                                  initializer=_start, initargs=(setup, setup_args))
@@ -133,58 +176,102 @@ class Pool:
         this process (module docstring): each worker is handed the next item as it
         finishes one, and this process takes the next one whenever it is free."""
         items = list(items)
-        if self._executor is None or len(items) < 2:
+        if self._executor is None or len(items) < 2 or self._items is not None:
             return [fn(item) for item in items]
         # pickled here, now: the executor pickles what it is handed in a thread of its own,
         # which would race this one's computing with the same objects (a cached property
         # filled in meanwhile: "dictionary changed size during iteration")
         fn_pickled = pickle.dumps(fn, protocol=pickle.HIGHEST_PROTOCOL)
-        pickled = [pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL) for item in items]
-        lock = threading.Lock()
-        taken = [0]
-        futures: dict[int, Future] = {}
-
-        def take() -> int | None:
-            i = taken[0]
-            if i == len(items):
-                return None
-            taken[0] += 1
-            return i
-
-        def feed(_done: Future | None = None) -> None:  # a worker is free: hand it the next item
-            with lock:
-                executor = self._executor
-                i = take() if executor is not None else None
-                if i is None:
-                    return
-                try:
-                    futures[i] = executor.submit(_run, fn_pickled, pickled[i])
-                except (BrokenProcessPool, RuntimeError):  # broken or closed meanwhile: this process runs it
-                    futures[i] = Future()
-                    futures[i].set_exception(BrokenProcessPool("the pool stopped"))
-                    return
-            futures[i].add_done_callback(feed)
-
+        run = _Items(fn_pickled, [pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL) for item in items])
         out: list[Any] = [None] * len(items)
-        for _ in range(self.workers):
-            feed()
-        while True:
-            with lock:
-                i = take()
-            if i is None:
-                break
-            out[i] = fn(items[i])
-        for i, future in futures.items():
+        with self._lock:
+            self._items = run
+            self._hand_out()
+        try:
+            while True:
+                with self._lock:
+                    i = run.take()
+                if i is None:
+                    break
+                out[i] = fn(items[i])
+        finally:
+            with self._lock:
+                self._items = None  # every item is taken: a worker that ends its own takes a deferred job
+                self._hand_out()
+        for i, future in run.futures.items():
             out[i] = self._result(future, fn, items[i])
         return out
+
+    def defer(self, fn: Callable[[Any], Any], item: Any) -> Deferred:
+        """Queue ``fn(item)`` for a worker to run when it has no map item to take
+        (module docstring); its result comes from :meth:`collect`. Both are pickled
+        now (in this thread; ``fn`` once for a run of jobs with the same function).
+        With no workers it is only queued, and :meth:`collect` runs it here."""
+        with self._lock:
+            if self._pickled is None or self._pickled[0] is not fn:
+                self._pickled = (fn, pickle.dumps(fn, protocol=pickle.HIGHEST_PROTOCOL))
+            job = Deferred(fn, item, self._pickled[1])
+            self._queued.append(job)
+            self._hand_out()
+        return job
+
+    def collect(self, jobs: list[Deferred]) -> list[Any]:
+        """The results of deferred ``jobs``, in order: those no worker has taken are
+        run now as a map (shared between the workers and this process), those a
+        worker runs are waited for."""
+        with self._lock:
+            waiting = [job for job in jobs if job.future is None]
+            for job in waiting:
+                self._queued.remove(job)
+        by_fn: dict[int, list[Deferred]] = {}
+        for job in waiting:
+            by_fn.setdefault(id(job.fn), []).append(job)
+        done: dict[int, Any] = {}
+        for group in by_fn.values():
+            done.update(zip(map(id, group), self.map(group[0].fn, [job.item for job in group])))
+        return [done[id(job)] if id(job) in done else self._result(job.future, job.fn, job.item) for job in jobs]
+
+    def _hand_out(self) -> None:
+        """Hand each free worker the running map's next item, else the next deferred
+        job (under the lock)."""
+        while self._executor is not None and self._busy < self.workers:
+            run, i = self._items, None
+            if run is not None:
+                i = run.take()
+            if i is not None:
+                fn_pickled, item_pickled, job = run.fn_pickled, run.pickled[i], None
+            elif self._queued:
+                job = self._queued.popleft()
+                fn_pickled, item_pickled = job.fn_pickled, job.item_pickled
+            else:
+                return
+            try:
+                future = self._executor.submit(_run, fn_pickled, item_pickled)
+                handed = True
+            except (BrokenProcessPool, RuntimeError):  # broken or closed meanwhile: this process runs it
+                future, handed = Future(), False
+                future.set_exception(BrokenProcessPool("the pool stopped"))
+            if job is None:
+                run.futures[i] = future
+            else:
+                job.future = future
+            if not handed:
+                return
+            self._busy += 1
+            future.add_done_callback(self._ended)  # at once if it has ended already
+
+    def _ended(self, _future: Future) -> None:
+        """A task handed out ended: its worker is free for the next (executor's thread)."""
+        with self._lock:
+            self._busy -= 1
+            self._hand_out()
 
     def _result(self, future: Future, fn, item):
         try:
             return future.result()
-        except BrokenProcessPool as exc:
+        except (BrokenProcessPool, CancelledError) as exc:
             self._break(exc)
             return fn(item)
-
     def _break(self, exc: BaseException) -> None:
         self.broken = self.broken or f"a worker process stopped ({exc}); the rest runs in this process"
         self.close()
