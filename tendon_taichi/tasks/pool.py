@@ -254,7 +254,7 @@ class Pool:
             if job is None:
                 run.futures[i] = future
             else:
-                job.future = future
+                job.future, job.item_pickled = future, b""  # handed out: its bytes are no longer needed
             if not handed:
                 return
             self._busy += 1
@@ -272,6 +272,7 @@ class Pool:
         except (BrokenProcessPool, CancelledError) as exc:
             self._break(exc)
             return fn(item)
+
     def _break(self, exc: BaseException) -> None:
         self.broken = self.broken or f"a worker process stopped ({exc}); the rest runs in this process"
         self.close()
