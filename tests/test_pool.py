@@ -253,3 +253,24 @@ def test_an_error_a_deferred_job_raises_reaches_the_collector():
         jobs = [pool.defer(fail, x) for x in range(4)]
         with pytest.raises(ValueError, match="two is bad"):
             pool.collect(jobs)
+
+
+def started_at(seconds: float) -> tuple[float, int]:
+    """When the call started, and in which process, after taking ``seconds``."""
+    t = time.monotonic()
+    time.sleep(seconds)
+    return t, os.getpid()
+
+
+def test_a_maps_items_go_before_the_deferred_jobs():
+    """A worker busy with a deferred job when a map starts takes the map's items
+    left when it is free, before the other queued jobs."""
+    with Pool(1) as pool:
+        assert wait_for(lambda: all(f.done() for f in pool._starting), 60)
+        first = pool.defer(started_at, 0.5)  # the idle worker takes it at once
+        queued = [pool.defer(started_at, 0.0) for _ in range(2)]
+        got = pool.map(started_at, [0.3] * 8)  # this process alone until the worker is free
+        in_worker = [t for t, pid in got if pid != os.getpid()]
+        (t_first, _), *rest = pool.collect([first] + queued)
+        assert in_worker and all(t < t_queued for t in in_worker for t_queued, _ in rest)
+        assert min(in_worker) > t_first

@@ -90,8 +90,8 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
     where that keeps the front on ``problem``'s mesh monotone) is solved on
     ``fine`` as well and replaces the front's layout when it does better there.
     ``workers`` share the solves of the finished layouts and the refits; ``solved``
-    (made with ``fine``) holds those of the finished layouts started while the
-    front was searched."""
+    (made with ``fine``, ``settings`` and ``solver``) holds those of the finished
+    layouts started while the front was searched."""
     solved = solved or FineSolves(fine, settings, solver, workers)
     fine_state = solved.state
     search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
