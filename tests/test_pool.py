@@ -216,10 +216,10 @@ def test_deferred_jobs_run_on_an_idle_worker_and_are_collected_in_order():
         assert pool.collect([]) == []
 
 
-def test_deferred_jobs_wait_for_a_maps_items_and_the_rest_are_shared_when_collected():
-    """A map started while jobs are queued hands its items out first; the jobs a
-    worker has not taken when they are collected run as a map, here and on the
-    worker; everything gives what the calls give here."""
+def test_deferred_jobs_and_a_map_mixed_and_the_rest_shared_when_collected():
+    """Jobs queued before a map and after it: the map gives its results, and the
+    jobs the worker has not taken when they are collected run as a map, here and
+    on the worker; everything gives what the calls give here."""
     with Pool(1) as pool:
         assert wait_for(lambda: all(f.done() for f in pool._starting), 60)
         jobs = [pool.defer(slow_square, x) for x in range(8)]
@@ -269,7 +269,7 @@ def test_a_maps_items_go_before_the_deferred_jobs():
         assert wait_for(lambda: all(f.done() for f in pool._starting), 60)
         first = pool.defer(started_at, 0.5)  # the idle worker takes it at once
         queued = [pool.defer(started_at, 0.0) for _ in range(2)]
-        got = pool.map(started_at, [0.3] * 8)  # this process alone until the worker is free
+        got = pool.map(started_at, [0.3] * 12)  # this process alone until the worker is free
         in_worker = [t for t, pid in got if pid != os.getpid()]
         (t_first, _), *rest = pool.collect([first] + queued)
         assert in_worker and all(t < t_queued for t in in_worker for t_queued, _ in rest)
