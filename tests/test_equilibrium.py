@@ -106,6 +106,34 @@ def test_serial_and_parallel_loops_agree(solver):
     assert np.abs(xs[0] - xs[1]).max() <= 1e-9 * p.size
 
 
+def test_models_run_parallel_loops_only_where_there_are_threads_to_spare(monkeypatch):
+    """By default a model runs its CPU loops in parallel from the threshold on only
+    where Taichi has 3 threads or more; with 1 or 2 every model serializes them (on 2
+    cores parallel loops were never faster). A threshold set by hand holds whatever
+    the threads."""
+    from tendon_taichi.physics import runtime
+
+    monkeypatch.delenv("TENDON_TAICHI_PARALLEL_THRESHOLD", raising=False)
+    p = build_problem(load_scene("gripper"), 1)
+    size = p.mesh.n_triangles + p.fibers.n_fibers
+    for threads, expected in ((1, None), (2, None), (3, runtime.DEFAULT_PARALLEL_THRESHOLD),
+                              (8, runtime.DEFAULT_PARALLEL_THRESHOLD)):
+        monkeypatch.setattr(runtime, "cpu_threads", lambda threads=threads: threads)
+        assert runtime.parallel_threshold() == expected
+        assert runtime.info()["parallel_threshold"] == expected
+        assert not Model.from_problem(p).parallel  # below the threshold, or no threshold
+        monkeypatch.setenv("TENDON_TAICHI_PARALLEL_THRESHOLD", str(size))
+        assert runtime.parallel_threshold() == size and Model.from_problem(p).parallel
+        monkeypatch.setenv("TENDON_TAICHI_PARALLEL_THRESHOLD", str(size + 1))
+        assert not Model.from_problem(p).parallel
+        monkeypatch.delenv("TENDON_TAICHI_PARALLEL_THRESHOLD")
+    monkeypatch.setattr(runtime, "DEFAULT_PARALLEL_THRESHOLD", size)  # a model at the default threshold
+    monkeypatch.setattr(runtime, "cpu_threads", lambda: 3)
+    assert Model.from_problem(p).parallel
+    monkeypatch.setattr(runtime, "cpu_threads", lambda: 2)
+    assert not Model.from_problem(p).parallel
+
+
 def test_preconditioners_agree_and_factor_needs_few_iterations():
     """The reused-factorization PCG and block-Jacobi PCG give the same equilibrium; a
     solve at a nearby design needs few factorization-preconditioned iterations."""

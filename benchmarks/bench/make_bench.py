@@ -128,6 +128,15 @@ def alone_line(alone: dict) -> str:
             f"{alone['wall_s']:.1f} s wall ({alone['evaluations']} evaluations), peak resident memory {peak}.")
 
 
+def _loops(machine: dict) -> str:
+    """How the Taichi loops ran, as the machine line says it (nothing for a bench made
+    before the threshold was recorded)."""
+    if "parallel_threshold" not in machine:
+        return ""
+    t = machine["parallel_threshold"]
+    return ", every Taichi loop serialized" if t is None else f", Taichi loops in parallel from {t} elements + segments"
+
+
 def page(result: dict, lines: list[str], plot: str) -> str:
     m, p = result["machine"], result["provenance"]
     exps = [f"exponents {s}: " + ", ".join(f"{k[:-2]} {v:.2f}" for k, v in d.items())
@@ -138,7 +147,7 @@ def page(result: dict, lines: list[str], plot: str) -> str:
         f"Measured on {m['cores']} cores ({m['cpu']}, Taichi {m['arch']}, Python {m['python']}"
         + (f", PARDISO's factorizations of {PARALLEL_MIN} DOFs or more on {m['factor_threads']} thread(s)"
            if m.get("pardiso_threaded", m.get("pardiso")) else "")
-        + "), "
+        + _loops(m) + "), "
         f"{result['repeat']} repeat(s), at commit `{p['commit']}`{' (with uncommitted changes)' if p['dirty'] else ''} "
         f"on {p['date']}, by `{p['made_by']}`.",
         "", "```text", *lines, *exps, f"compile {result['compile_s']:.1f} s", "```", "",

@@ -32,7 +32,8 @@ class Model:
     Parameters: ``mesh`` rest mesh; ``fixed`` bool (n,) clamped nodes;
     ``material``; ``cables``; ``eps`` the width of the unilateral energy's
     cubic zone (strain); ``parallel`` forces parallel (True) or serialized
-    (False) loops, ``None`` picks by size.
+    (False) loops, ``None`` picks by size and threads
+    (:func:`~tendon_taichi.physics.runtime.parallel_threshold`).
     """
 
     def __init__(self, mesh: Mesh, fixed: np.ndarray, material: Material, cables: CableSet,
@@ -44,7 +45,8 @@ class Model:
         self.S, self.C, self.P = cables.n_segments, cables.n_cables, len(cables.points)
         self.single = cables.single_segment
         if parallel is None:
-            parallel = (not runtime.is_cpu()) or (self.m + self.S >= runtime.parallel_threshold())
+            threshold = runtime.parallel_threshold()
+            parallel = (not runtime.is_cpu()) or (threshold is not None and self.m + self.S >= threshold)
         self.parallel = bool(parallel)
         self.serial = not self.parallel
         self._upload()

@@ -33,6 +33,14 @@ ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu")
 #: costs a fixed ~0.1 ms to dispatch on the CPU backend (measured by bench).
 DEFAULT_PARALLEL_THRESHOLD = 20000
 
+#: ... where Taichi's loops have at least this many threads (:func:`cpu_threads`); with
+#: fewer, every model runs them serialized. On 2 cores parallel loops were slower at every
+#: size measured: t_shape at level 6 (36k elements + segments; ``bench``: a direct gradient
+#: 0.085 s serialized against 0.109 s, a cg equilibrium from rest 0.64 s against 0.97 s), as
+#: fast at level 7 (73k) and level 8 (146k; a warm direct equilibrium 0.80-0.84 s against
+#: 0.84-0.85 s). With more threads they were not measured: the threshold above stays there
+PARALLEL_MIN_THREADS = 3
+
 #: BLAS threads (numpy, scipy): our vectors are short (<= ~1e5) and threaded
 #: OpenBLAS made a level-5 warm CG solve 3.5x slower (72 vs 250 ms, bench)
 DEFAULT_BLAS_THREADS = 1
@@ -280,11 +288,17 @@ def share_cores() -> None:
     _state["cores_shared"] = True
 
 
-def parallel_threshold() -> int:
+def parallel_threshold() -> int | None:
+    """The least elements + cable segments of a model that runs its CPU loops in
+    parallel: the one set (:func:`configure`, ``TENDON_TAICHI_PARALLEL_THRESHOLD``),
+    else :data:`DEFAULT_PARALLEL_THRESHOLD` with :data:`PARALLEL_MIN_THREADS` threads
+    or more, else None (every model serialized)."""
     if _settings["parallel_threshold"] is not None:
         return _settings["parallel_threshold"]
     n = _env_int("TENDON_TAICHI_PARALLEL_THRESHOLD")
-    return DEFAULT_PARALLEL_THRESHOLD if n is None else n
+    if n is not None:
+        return n
+    return DEFAULT_PARALLEL_THRESHOLD if cpu_threads() >= PARALLEL_MIN_THREADS else None
 
 
 def check() -> None:
