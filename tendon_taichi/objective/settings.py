@@ -17,7 +17,7 @@ from .terms import registered
 
 #: the homotopy schedule, the inline table ``homotopy = { k0 = ..., factor = ..., k_min = ... }``
 HOMOTOPY = (
-    Setting("k0", 1.0, "first homotopy k", "N", gt=0.0, table="homotopy"),
+    Setting("k0", 0.25, "first homotopy k", "N", gt=0.0, table="homotopy"),
     Setting("factor", 0.5, "k <- k * factor per stage", gt=0.0, lt=1.0, table="homotopy", flag_name="--k-factor"),
     Setting("k_min", 0.01, "stop once k falls below this (at most k0)", "N", gt=0.0, table="homotopy"),
 )
