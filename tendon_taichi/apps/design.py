@@ -152,7 +152,7 @@ def warm_up() -> float:
     from ..body.scene import load_scene, with_overrides
 
     t0 = time.perf_counter()
-    scene = with_overrides(load_scene("t_shape"), {"stage_iterations": 3, "k_min": 0.5})
+    scene = with_overrides(load_scene("t_shape"), {"stage_iterations": 3, "k_min": 0.125})
     with tempfile.TemporaryDirectory(prefix="tendon-taichi-warmup-") as tmp:
         design(scene, 1, tmp, budget=1.0, consolidation=ConsolidationSettings(tolerance=-1.0, refine=0),
                png=False, converge=False)

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneError
-from ..objective.settings import OptimizeSettings, read_optimize
+from ..objective.settings import Homotopy, OptimizeSettings, read_optimize
 from ..tables import TableReader, as_point
 from .geometry import (MIN_WIDTH_RATIO, normalize_polygon, polygon_self_intersects, polygon_too_thin,
                        polygons_overlap)
@@ -379,9 +379,13 @@ def with_overrides(scene: Scene, overrides: dict, origin: str = "command line") 
     """A copy of ``scene`` with [optimize] settings replaced, validated like the file.
 
     ``overrides`` maps optimize keys (``homotopy`` keys as ``k0``, ``factor``,
-    ``k_min``) to values; None values are ignored."""
+    ``k_min``) to values; None values are ignored. A ``k0`` at its default, not
+    overridden, is left for :func:`~tendon_taichi.objective.settings.read_optimize`
+    to raise to a larger ``k_min``."""
     table = {k: v for k, v in scene.optimize.__dict__.items() if k != "homotopy"}
     hom = dict(scene.optimize.homotopy.__dict__)
+    if overrides.get("k0") is None and hom["k0"] == Homotopy().k0:
+        del hom["k0"]
     for key, value in overrides.items():
         if value is None:
             continue

@@ -8,7 +8,7 @@ edits."""
 
 from __future__ import annotations
 
-from dataclasses import field, make_dataclass
+from dataclasses import field, make_dataclass, replace
 
 from ..errors import SceneError
 from ..tables import TableReader
@@ -71,12 +71,17 @@ OptimizeSettings.__doc__ = _doc("Weights and schedule of the regularized soft IK
 
 def read_optimize(r: TableReader, fibers) -> OptimizeSettings:
     """The ``[optimize]`` table read by ``r`` (its keys validated, unknown ones
-    rejected); ``fibers`` are the scene's fiber settings."""
+    rejected); ``fibers`` are the scene's fiber settings. A homotopy table
+    without ``k0`` starts at the default k0 or at its ``k_min``, the larger
+    (a ``k_min`` above the default still runs one homotopy stage)."""
     hom = Homotopy()
     if r.has("homotopy"):
         h = TableReader(r.raw("homotopy"), f"{r.where}.homotopy", r.origin)
+        given = h.has("k0")
         hom = Homotopy(**{s.name: s.read(h, fibers) for s in HOMOTOPY})
         h.finish()
+        if not given:
+            hom = replace(hom, k0=max(hom.k0, hom.k_min))
         if hom.k_min > hom.k0:
             raise SceneError(f"{r.origin}: {r.where}.homotopy.k_min ({hom.k_min:g}) must be <= k0 "
                              f"({hom.k0:g}), else no homotopy stage runs")
