@@ -31,7 +31,7 @@ def run_rrd(tmp_path_factory):
     """The recording of a short t_shape optimization (5 stages, sparse at the end),
     shared by the tests that extract from a recording; they read it or copy it."""
     d = tmp_path_factory.mktemp("run")
-    r = run_cli("optimize", "t_shape", "--stage-iterations", "25", "--k-min", "0.1", "--record", d / "run.rrd",
+    r = run_cli("optimize", "t_shape", "--stage-iterations", "25", "--k-min", "0.02", "--record", d / "run.rrd",
                 "--quiet", cwd=d)
     assert r.returncode == 0, r.stderr
     return d / "run.rrd"

@@ -16,8 +16,8 @@ BENCH = ROOT / "benchmarks"
 #: a short optimization that still ends sparse (a dense pattern would make consolidation slow)
 TINY = ("--set", "stage_iterations=30", "--beam", 1, "--no-converge")
 #: the side-by-side scripts' design options (after SCENE LEVEL): short, one extractor, one round, beam 1
-SHORT_DESIGN = ("--stage-iterations", 25, "--k-min", 0.1, "--extractors", "strands", "--refine", 1, "--beam", 1,
-                "--no-converge")
+SHORT_DESIGN = ("--stage-iterations", 25, "--k0", 1, "--k-min", 0.1, "--extractors", "strands", "--refine", 1,
+                "--beam", 1, "--no-converge")
 
 
 def run(script: Path, *args, cwd=None, timeout=900):

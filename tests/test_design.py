@@ -289,7 +289,7 @@ def test_the_optimizations_warnings_come_before_the_search(cli, tmp_path):
 
     (tmp_path / "s.toml").write_text(load_scene("finger").source.replace("goal = [0.0939, 0.0345]",
                                                                          "goal = [0.06, 0.05]"))
-    r = cli("design", "s.toml", "--out", "out", "--stage-iterations", "10", "--k-min", "0.4", "--sparsity", "0.1",
+    r = cli("design", "s.toml", "--out", "out", "--stage-iterations", "10", "--k0", "1", "--k-min", "0.4", "--sparsity", "0.1",
             "--extractors", "strands", "--beam", "1", "--no-converge", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     lines = r.stderr.splitlines()
@@ -304,7 +304,7 @@ def test_a_pattern_too_sparse_for_a_tendon_is_said_with_what_it_keeps(cli, tmp_p
     """A sparsity weight that leaves one active fiber: no layout, and the one line
     says what the stage the extractors read keeps."""
     (tmp_path / "s.toml").write_text(SCENE)
-    r = cli("design", "s.toml", "--out", "out", "--quiet", "--stage-iterations", "25", "--k-min", "0.4",
+    r = cli("design", "s.toml", "--out", "out", "--quiet", "--stage-iterations", "25", "--k0", "1", "--k-min", "0.4",
             "--sparsity", "0.1", "--extractors", "strands", "--beam", "1", "--no-converge", cwd=tmp_path)
     assert r.returncode == 2 and r.stdout == ""
     lines = r.stderr.strip().splitlines()

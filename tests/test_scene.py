@@ -7,7 +7,7 @@ import pytest
 
 from tendon_taichi import SceneError, build_problem, builtin_scenes, load_scene, parse_scene
 from tendon_taichi.body.geometry import points_in_polygon
-from tendon_taichi.body.scene import FiberSettings, Material
+from tendon_taichi.body.scene import FiberSettings, Material, with_overrides
 from tendon_taichi.objective.settings import OptimizeSettings
 
 SQUARE = """
@@ -50,7 +50,25 @@ def test_defaults_are_documented_values():
     assert sc.fibers == FiberSettings()
     assert sc.optimize == OptimizeSettings()
     assert sc.optimize.sparsity == 1e-4 and sc.optimize.continuity == 2.5e-5
-    assert sc.optimize.homotopy.k0 == 1.0 and sc.optimize.homotopy.factor == 0.5
+    assert sc.optimize.homotopy.k0 == 0.25 and sc.optimize.homotopy.factor == 0.5
+
+
+def test_a_k_min_above_the_default_k0_starts_the_homotopy_there_unless_k0_is_given():
+    hom = lambda table: _with_optimize(table).optimize.homotopy  # noqa: E731
+    assert (hom("homotopy = { k_min = 0.4 }").k0, hom("homotopy = { k_min = 0.1 }").k0) == (0.4, 0.25)
+    assert hom("homotopy = { k0 = 1.0, k_min = 0.4 }").k0 == 1.0
+    with pytest.raises(SceneError, match=r"k_min \(0.4\) must be <= k0 \(0.2\)"):
+        hom("homotopy = { k0 = 0.2, k_min = 0.4 }")
+    sc = load_scene("t_shape")
+    assert with_overrides(sc, {"k_min": 0.4}).optimize.homotopy.k0 == 0.4  # --k-min 0.4 alone
+    assert with_overrides(sc, {"k_min": 0.1}).optimize.homotopy.k0 == 0.25
+    with pytest.raises(SceneError, match="must be <= k0"):
+        with_overrides(sc, {"k0": 0.2, "k_min": 0.4})
+
+
+def _with_optimize(table: str):
+    return parse_scene(SQUARE.format(outline="[[0, 0], [0.04, 0], [0.04, 0.04], [0, 0.04]]")
+                       + f"\n[optimize]\n{table}\n")
 
 
 def test_resolution_halves_area_and_shrinks_spacing():
