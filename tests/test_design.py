@@ -289,8 +289,8 @@ def test_the_optimizations_warnings_come_before_the_search(cli, tmp_path):
 
     (tmp_path / "s.toml").write_text(load_scene("finger").source.replace("goal = [0.0939, 0.0345]",
                                                                          "goal = [0.06, 0.05]"))
-    r = cli("design", "s.toml", "--out", "out", "--stage-iterations", "10", "--k0", "1", "--k-min", "0.4", "--sparsity", "0.1",
-            "--extractors", "strands", "--beam", "1", "--no-converge", cwd=tmp_path)
+    r = cli("design", "s.toml", "--out", "out", "--stage-iterations", "10", "--k0", "1", "--k-min", "0.4",
+            "--sparsity", "0.1", "--extractors", "strands", "--beam", "1", "--no-converge", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     lines = r.stderr.splitlines()
     said = "the regularizers gave up the pose"
