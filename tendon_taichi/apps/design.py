@@ -34,6 +34,7 @@ from ..extract.settings import BEAM, BUDGET, ConsolidationSettings
 from ..files import check_writable, file_stem, write_json
 from ..io.drawing import write_svg
 from ..io.export import write_as_built
+from ..io.plots import load as load_pictures
 from ..io.plots import plot_design, plot_front
 from ..io.progress import Progress
 from ..io.recording import rewrite
@@ -129,7 +130,8 @@ def default_workers() -> int:
 def start_worker(threads: int | None, arch: str | None = None, warm: bool = True) -> dict:
     """A worker process's set-up (``design``'s pool, the task engine's Dask
     workers): start Taichi (``arch``, ``threads``) and, with ``warm``, compile the
-    kernels by a short design (:func:`warm_up`); returns the times (``init_s``,
+    kernels by a short design (:func:`warm_up`) and import what the pictures use
+    (:func:`~tendon_taichi.io.plots.load`); returns the times (``init_s``,
     ``warm_up_s``). Its factorizations run on one thread
     (:func:`~tendon_taichi.physics.runtime.share_cores`)."""
     t0 = time.perf_counter()
@@ -139,7 +141,12 @@ def start_worker(threads: int | None, arch: str | None = None, warm: bool = True
     out = {"init_s": time.perf_counter() - t0, "warm_up_s": None}
     if warm:
         out["warm_up_s"] = warm_up()
+        load_pictures()
     return out
+
+
+#: the one extractor the warm-up runs (:func:`warm_up`), where it is installed
+WARM_UP_EXTRACTOR = "strands"
 
 
 def warm_up() -> float:
@@ -148,14 +155,20 @@ def warm_up() -> float:
     consolidation: the realizable robots it solves use the same kernels, and after
     three iterations per stage the pattern is still dense, which would make
     consolidating it take about a minute, and the pose it reaches is not checked
-    against a budget (:func:`check_reach`)."""
+    against a budget (:func:`check_reach`). It runs one extractor
+    (:data:`WARM_UP_EXTRACTOR`, else every installed one): every extractor's layout
+    is solved by the same kernels, and the three built-in ones' dense layouts took
+    6.2 s to solve against 2.5 s for one (the worker then joins a level-2 design's
+    consolidations from their start, not midway)."""
     from ..body.scene import load_scene, with_overrides
+    from ..extract.plugins import available_extractors
 
     t0 = time.perf_counter()
     scene = with_overrides(load_scene("t_shape"), {"stage_iterations": 3, "k_min": 0.125})
+    names = [WARM_UP_EXTRACTOR] if WARM_UP_EXTRACTOR in available_extractors() else None
     with tempfile.TemporaryDirectory(prefix="tendon-taichi-warmup-") as tmp:
-        design(scene, 1, tmp, budget=1.0, consolidation=ConsolidationSettings(tolerance=-1.0, refine=0),
-               png=False, converge=False)
+        design(scene, 1, tmp, budget=1.0, extractors=names,
+               consolidation=ConsolidationSettings(tolerance=-1.0, refine=0), png=False, converge=False)
     return time.perf_counter() - t0
 
 
@@ -195,12 +208,12 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
             progress.message(f"design: warning: {w}")
         ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
                                           plugin_timeout, beam, converge, pool, prior, min_capstan)
+        summary["timing"]["optimize_s"] = run.summary["time_s"]
+        summary["timing"]["workers"] = workers
+        summary["warnings"] = list(run.warnings) + _budget_warning(summary)
+        summary["files"] = _write(out, ex, layout, summary, png, pool)
     if pool.broken:
         progress.message(f"design: {pool.broken}")
-    summary["timing"]["optimize_s"] = run.summary["time_s"]
-    summary["timing"]["workers"] = workers
-    summary["warnings"] = list(run.warnings) + _budget_warning(summary)
-    summary["files"] = _write(out, ex, layout, summary, png)
     summary["time_s"] = time.perf_counter() - t0
     write_json(summary, out / "design.json")
     return Design(summary, run, ex, layout)
@@ -382,20 +395,25 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], bud
             "provenance": result_provenance()}
 
 
-def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool) -> dict:
-    """The drawing, the pictures and the routes logged into the recording."""
+def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool, pool: Pool | None = None) -> dict:
+    """The drawing, the pictures and the routes logged into the recording. The
+    pictures are drawn by a worker of ``pool`` where it has one, while this process
+    writes the rest (they took a level-2 design's last second, matplotlib's import
+    included, which the workers did as they started)."""
     problem = ex.problem
     tendons = layout.tendons()
     title = f"{problem.scene.name} level {problem.level}: {layout.count} tendon(s), as built " \
             f"{100 * layout.error:.2f}% of L"
+    pictures, pool = None, pool if pool is not None else Pool(0)
+    if png:
+        job = ((out / "design.png", problem, tendons, layout.realizable, title),
+               (out / "front.png", summary["front"], summary["budget"], summary["recommended"]["count"],
+                problem.scene.name))
+        pictures = pool.defer(_draw_pictures, job)
     paths = {"recording": str(out / "run.rrd"), "export": str(out / "run.npz"), "json": str(out / "design.json"),
              "svg": str(write_svg(out / "design.svg", problem, tendons, title)),
              "as_built": str(write_as_built(out / "as_built.npz", problem,
                                             as_built_arrays(problem, tendons, layout.realizable)))}
-    if png:
-        paths["png"] = str(plot_design(out / "design.png", problem, tendons, layout.realizable, title))
-        paths["front_png"] = str(plot_front(out / "front.png", summary["front"], summary["budget"],
-                                            summary["recommended"]["count"], problem.scene.name))
     run = ex.run
     stage = ex.stage
 
@@ -406,4 +424,12 @@ def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool) 
         rec.log("/design/summary", rr.TextDocument(json.dumps(summary), media_type="text/plain"))
 
     rewrite(run.path, run.meta.get("run_id"), lambda ch: not ch.entity_path.startswith("/design/"), add)
+    if pictures is not None:
+        paths["png"], paths["front_png"] = pool.collect([pictures])[0]
     return paths
+
+
+def _draw_pictures(job: tuple[tuple, tuple]) -> tuple[str, str]:
+    """design.png and front.png from the arguments of :func:`~tendon_taichi.io.plots.plot_design`
+    and of :func:`~tendon_taichi.io.plots.plot_front`; their paths."""
+    return str(plot_design(*job[0])), str(plot_front(*job[1]))
