@@ -201,6 +201,17 @@ def test_a_worker_whose_job_is_killed_while_it_sets_up_cleans_up_after_itself(tm
     assert wait_for(lambda: [p.name for p in tmp_path.iterdir()] == ["job.py"], 20), list(tmp_path.iterdir())
 
 
+def test_leaving_the_pool_stops_its_idle_workers_rather_than_waiting_for_them():
+    """Once the work is done, leaving the pool stops its workers (SIGTERM, as with
+    an error): the process that ran the job does not wait at its own exit for
+    them to shut down."""
+    with Pool(1) as pool:
+        assert [v for v, _ in pool.map(square, range(4))] == [x * x for x in range(4)]
+        workers = list(pool._executor._processes.values())
+    assert workers and wait_for(lambda: all(p.exitcode is not None for p in workers), 20)
+    assert [p.exitcode for p in workers] == [-signal.SIGTERM]
+
+
 def slow_square(x: int) -> tuple[int, int]:
     time.sleep(0.2)
     return x * x, os.getpid()
