@@ -16,7 +16,7 @@ import pytest
 from tendon_taichi import build_problem, load_scene
 from tendon_taichi.io.recording import Recorder, read_recording
 
-# five short stages (k = -, 1, 0.5, 0.25, 0.125) on t_shape level 1
+# five short stages (k = -, 0.25, 0.125, 0.0625, 0.03125) on t_shape level 1
 SHORT = ["--stage-iterations", "15", "--k-min", "0.02"]
 
 

@@ -34,8 +34,7 @@ from ..extract.settings import BEAM, BUDGET, ConsolidationSettings
 from ..files import check_writable, file_stem, write_json
 from ..io.drawing import write_svg
 from ..io.export import write_as_built
-from ..io.plots import load as load_pictures
-from ..io.plots import plot_design, plot_front
+from ..io.plots import load as load_pictures, plot_design, plot_front
 from ..io.progress import Progress
 from ..io.recording import rewrite
 from ..physics import runtime
@@ -395,7 +394,7 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], bud
             "provenance": result_provenance()}
 
 
-def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool, pool: Pool | None = None) -> dict:
+def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool, pool: Pool) -> dict:
     """The drawing, the pictures and the routes logged into the recording. The
     pictures are drawn by a worker of ``pool`` where it has one, while this process
     writes the rest (they took a level-2 design's last second, matplotlib's import
@@ -404,7 +403,7 @@ def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool, 
     tendons = layout.tendons()
     title = f"{problem.scene.name} level {problem.level}: {layout.count} tendon(s), as built " \
             f"{100 * layout.error:.2f}% of L"
-    pictures, pool = None, pool if pool is not None else Pool(0)
+    pictures = None
     if png:
         job = ((out / "design.png", problem, tendons, layout.realizable, title),
                (out / "front.png", summary["front"], summary["budget"], summary["recommended"]["count"],
