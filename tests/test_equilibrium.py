@@ -358,6 +358,10 @@ def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu(monkeyp
     else:
         assert indefinite.ldl is None and indefinite.lu is not None
     assert residual(indefinite, shifted) < 1e-8
+    if cholesky == "pardiso":  # a newer indefinite one replaces the shared factors: the older makes its own
+        newer = d.factorize(replace(H, Hp=2.0 * shifted))
+        assert newer.ldl.indefinite and residual(newer, 2.0 * shifted) < 1e-8 and residual(indefinite, shifted) < 1e-8
+        assert indefinite.ldl is not newer.ldl and indefinite.ldl.indefinite
     again = d.factorize(replace(H, Hp=sp.csc_matrix((2.0 * H.Hp.data, H.Hp.indices, H.Hp.indptr))))
     assert again.ldl is spd.ldl  # the same symbolic analysis, new numbers
     assert residual(again, 2.0 * H.Hp) < 1e-10 and residual(spd, H.Hp) < 1e-10  # spd made its own copy

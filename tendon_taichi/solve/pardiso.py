@@ -12,9 +12,9 @@ a compressed body) the Hessian's sparse part may have negative eigenvalues:
 the Cholesky stops at a pivot <= 0. Such a matrix is factorized by PARDISO's
 symmetric indefinite LDL^T (``mtype`` -2, Bunch-Kaufman 1x1 and 2x2 pivots
 within its supernodes, ``indefinite``), which counts the negative eigenvalues
-(:attr:`PardisoLDL.negative`). Where a pivot is too small for those pivots it
-would perturb it (``iparm[9]``: below 1e-8 of the matrix) and solve a
-slightly different matrix; it then refuses, and the direct backend takes
+(:attr:`PardisoLDL.negative`). Where even those pivots leave one too small
+(``iparm[9]``: below 1e-8 of the matrix) it would perturb that pivot and solve
+a slightly different matrix; it refuses instead, and the direct backend takes
 SuperLU, which pivots across the whole matrix. On the 35 route optimizations of
 ``design t_shape --resolution 3`` (``benchmarks/route_replay.py``) a factorization
 that was not positive definite took 20.4 ms with SuperLU (the failed Cholesky
@@ -247,7 +247,8 @@ class PardisoLDL:
         for an absent ``b`` or ``x``."""
         if self._args is None:
             ptr, one = ctypes.c_void_p, ctypes.byref(ctypes.c_int32(1))
-            self._args = ((ptr(self._pt.ctypes.data), one, one, ctypes.byref(ctypes.c_int32(-2 if self.indefinite else 2))),
+            mtype = ctypes.byref(ctypes.c_int32(-2 if self.indefinite else 2))
+            self._args = ((ptr(self._pt.ctypes.data), one, one, mtype),
                           (ctypes.byref(ctypes.c_int32(self.n)), ptr(self._data.ctypes.data),
                            ptr(self.ia.ctypes.data), ptr(self.ja.ctypes.data), ptr(self._perm.ctypes.data), one,
                            ptr(self._iparm.ctypes.data), ctypes.byref(ctypes.c_int32(0))),
