@@ -168,6 +168,42 @@ def test_route_gradient_matches_central_differences():
     assert not J[:, n:].any()  # the contractions move no waypoint
 
 
+def test_a_straight_run_in_one_triangle_has_the_gradient_central_differences_see(monkeypatch):
+    """A straight route whose waypoints 8-10 lie in one triangle: they stay in line
+    under its affine deformation, so the joint at waypoint 9 turns by round-off,
+    where |theta| has its kink. Moving a control point across the route turns that
+    joint either way alike, and the gradient is what central differences see; with
+    the sign of the round-off in its place (``STRAIGHT`` 0) it is not."""
+    from tendon_taichi.physics import capstan
+
+    p = build_problem(load_scene("t_shape"), 1)
+    t = np.linspace(0, 1, 12)
+    routes = [fit_route(np.stack([0.002 + 0.032 * t, 0.074 + 0.0 * t], 1), p.size, 0.4)]
+    obj = RouteObjective(p, routes, p.scene.optimize, RouteSettings(friction=0.3, clearance=0.02 * p.size), "direct")
+    obj.eval_tol = 1e-14
+    z = obj.pack(routes, np.array([[0.08]]))
+    across = np.arange(3, obj.n_control - 2, 2)  # the y of the interior control points
+
+    def gradient_and_differences(straight):
+        monkeypatch.setattr(capstan, "STRAIGHT", straight)
+        g = obj.evaluate(z)[1]
+        model = obj.ik.poses[0].model
+        assert np.all(model.cables.points.tri[8:11] == model.cables.points.tri[9])
+        theta = model.capstan.state(model.cables.points.positions(p.mesh.triangles, model.positions())).theta
+        assert abs(theta[8]) < 1e-13 and np.abs(np.delete(theta[:-1], 8)).min() > 1e-5
+        h, fd = 1e-6, []
+        for j in across:
+            e = np.zeros_like(z)
+            e[j] = h
+            fd.append((obj.evaluate(z + e)[0] - obj.evaluate(z - e)[0]) / (2 * h))
+        return g[across], np.array(fd)
+
+    g, fd = gradient_and_differences(capstan.STRAIGHT)
+    assert np.abs(g - fd).max() <= 2e-5 * np.abs(fd).max()
+    g, fd = gradient_and_differences(0.0)
+    assert np.abs(g - fd).max() > 1e-3 * np.abs(fd).max()
+
+
 def test_a_point_valued_alone_leaves_the_next_gradient_exact(monkeypatch):
     """The objective at a point without its gradient (a trial step SLSQP's line
     search rejects: no adjoint solve) leaves the next point's gradient what a new

@@ -24,6 +24,12 @@ term of the weights' own dependence on ``x``,
 
 which is not symmetric: :class:`FrictionJacobian` applies ``E`` and
 ``E^T`` (numpy, O(segments)) for the adjoint and the sensitivities.
+
+``|theta|`` has a kink at a straight joint, and the joints of a straight run of
+waypoints in one triangle stay straight under its affine deformation, with a
+``theta`` of round-off (about 1e-15). There ``E`` takes the derivative that
+central differences see, ``d|theta|/dtheta = 0``, for every ``|theta|`` below
+:data:`STRAIGHT`, instead of a sign that the last bits of the state choose.
 """
 
 from __future__ import annotations
@@ -34,6 +40,12 @@ from functools import cached_property
 import numpy as np
 
 from ..body.cables import CableSet
+
+
+#: a joint that turns by less than this (rad) is straight to :class:`FrictionJacobian`
+#: (module docstring): far above the round-off of a straight joint's angle, and far below
+#: any turn whose friction (a factor ``exp(-mu theta)``) could matter
+STRAIGHT = 1e-10
 
 
 def perp(v: np.ndarray) -> np.ndarray:
@@ -154,7 +166,8 @@ class FrictionJacobian:
         #: dtau/dw_s (S,): through L_w and through rho
         self.dtau_dw = np.asarray(kc)[c] * (st.l - (1.0 + np.asarray(e)[c]) * np.asarray(free_length)[c]
                                             * cap.l0 / cap.l0_sum[c])
-        self.sigma = np.sign(st.theta)
+        #: d|theta_j|/dtheta_j (S,): the sign of the turn, 0 at a straight joint
+        self.sigma = np.where(np.abs(st.theta) < STRAIGHT, 0.0, np.sign(st.theta))
 
     # ------------------------------------------------------------ point-level pieces
     def segment_diff(self, V: np.ndarray) -> np.ndarray:
