@@ -323,9 +323,10 @@ def test_large_contraction_keeps_triangles_valid():
 def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu(monkeypatch, cholesky):
     """At a stable equilibrium the Hessian is positive definite and factorized by
     LDL^T or PARDISO's Cholesky (its symbolic analysis kept for the next); shifted
-    to be indefinite it is factorized by SuperLU; both solve their own matrix, and
-    a factorization still solves its own matrix after a newer one of the same
-    pattern replaced the shared factors."""
+    to be indefinite it is factorized by PARDISO's symmetric indefinite
+    factorization (with qdldl: SuperLU), which counts its one negative eigenvalue;
+    both solve their own matrix, and a factorization still solves its own matrix
+    after a newer one of the same pattern replaced the shared factors."""
     from dataclasses import replace
 
     import scipy.sparse as sp
@@ -352,10 +353,46 @@ def test_the_direct_factorization_is_ldl_where_positive_definite_else_lu(monkeyp
     data[H.Hp.indices == np.repeat(np.arange(n), np.diff(H.Hp.indptr))] -= 2 * abs(lowest)
     shifted = sp.csc_matrix((data, H.Hp.indices, H.Hp.indptr), shape=(n, n))
     indefinite = d.factorize(replace(H, Hp=shifted))
-    assert indefinite.ldl is None and indefinite.lu is not None and residual(indefinite, shifted) < 1e-8
+    if cholesky == "pardiso":
+        assert indefinite.ldl.indefinite and indefinite.lu is None and indefinite.ldl.negative == 1
+    else:
+        assert indefinite.ldl is None and indefinite.lu is not None
+    assert residual(indefinite, shifted) < 1e-8
+    if cholesky == "pardiso":  # a newer indefinite one replaces the shared factors: the older makes its own
+        newer = d.factorize(replace(H, Hp=2.0 * shifted))
+        assert newer.ldl.indefinite and residual(newer, 2.0 * shifted) < 1e-8 and residual(indefinite, shifted) < 1e-8
+        assert indefinite.ldl is not newer.ldl and indefinite.ldl.indefinite
     again = d.factorize(replace(H, Hp=sp.csc_matrix((2.0 * H.Hp.data, H.Hp.indices, H.Hp.indptr))))
     assert again.ldl is spd.ldl  # the same symbolic analysis, new numbers
     assert residual(again, 2.0 * H.Hp) < 1e-10 and residual(spd, H.Hp) < 1e-10  # spd made its own copy
+
+
+def test_pardisos_indefinite_factorization_counts_the_inertia_and_refuses_a_perturbed_pivot(monkeypatch):
+    """PARDISO's symmetric indefinite factorization solves an indefinite matrix and
+    counts its negative eigenvalues (numpy's count); where it would have to perturb a
+    pivot (a singular matrix) it refuses, and the direct backend takes SuperLU."""
+    import scipy.sparse as sp
+
+    from tendon_taichi.solve import pardiso
+    from tendon_taichi.solve.direct import Assembled, Factorization
+
+    use_cholesky(monkeypatch, "pardiso")
+    rng = np.random.default_rng(3)
+    Q = np.linalg.qr(rng.standard_normal((6, 6)))[0]
+    dense = Q @ np.diag([3.0, -2.0, 1.0, -0.5, 4.0, 2.0]) @ Q.T
+    A = sp.csc_matrix(dense)
+    ldl = pardiso.PardisoLDL(A.indptr, A.indices, 6, indefinite=True)
+    assert ldl.factor(A.data) and ldl.negative == int((np.linalg.eigvalsh(dense) < 0).sum()) == 2
+    b = rng.standard_normal(6)
+    assert np.linalg.norm(dense @ ldl.solve(b) - b) <= 1e-12 * np.linalg.norm(b)
+    cholesky = pardiso.PardisoLDL(A.indptr, A.indices, 6)
+    assert not cholesky.factor(A.data)  # not positive definite
+
+    singular = sp.csc_matrix(np.array([[1.0, 1.0, 0.0], [1.0, 1.0 + 1e-13, 0.0], [0.0, 0.0, -1.0]]))
+    handles = [pardiso.PardisoLDL(singular.indptr, singular.indices, 3, indefinite=flag) for flag in (False, True)]
+    assert not handles[1].factor(singular.data)  # a pivot of 1e-13: perturbed, so refused
+    fac = Factorization(Assembled(singular, np.zeros((3, 0)), np.zeros(0)), np.arange(3), *handles)
+    assert fac.ldl is None and fac.lu is not None
 
 
 def test_pardiso_solves_as_qdldl_does_and_the_same_every_time(monkeypatch):
@@ -441,7 +478,8 @@ def test_every_blas_is_capped_however_late_it_loads():
 def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatch):
     """A lattice's Hessian (t_shape at level 4, 5336 DOFs: above the parallel
     threshold, in the reproducible mode) factorized by PARDISO on 1, 2 and 3
-    threads, in its own order or PARDISO's, solves to the same bits, one
+    threads, in its own order or PARDISO's, and shifted to be indefinite by its
+    indefinite factorization, solves to the same bits, one
     right-hand side or several at once (a tendon robot's low-rank columns); a process
     factorizes a matrix above the threshold on its threads only while it has its
     cores to itself, and one below it on one thread, outside the mode."""
@@ -459,17 +497,22 @@ def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatc
     assert n >= pardiso.PARALLEL_MIN
     rng = np.random.default_rng(0)
     rhs = [rng.standard_normal(n), rng.standard_normal((n, 2)), rng.standard_normal((n, 3))]
-    for reorder in (False, True):  # the pattern's order (a lattice's), PARDISO's own (a tendon robot's)
+    lowest = sp.linalg.eigsh(H, k=1, sigma=0, which="LM", return_eigenvectors=False)[0]
+    shifted = (H - 2.0 * abs(lowest) * sp.identity(n, format="csc")).tocsc()  # one negative eigenvalue
+    shifted.sort_indices()
+    # the pattern's order (a lattice's), PARDISO's own (a tendon robot's); the indefinite factorization
+    for reorder, indefinite, M in ((False, False, H), (True, False, H), (True, True, shifted)):
+        assert np.array_equal(M.indptr, H.indptr) and np.array_equal(M.indices, H.indices)
         solutions = []
         for threads in (1, 2, 3):
-            ldl = pardiso.PardisoLDL(H.indptr, H.indices, n, reorder=reorder)
+            ldl = pardiso.PardisoLDL(M.indptr, M.indices, n, reorder=reorder, indefinite=indefinite)
             assert ldl.reproducible
             ldl.threads = threads
-            assert ldl.factor(H.data) and ldl.factor(H.data)
-            assert ldl.threads_used == (threads if pardiso.threaded() else 1)
+            assert ldl.factor(M.data) and ldl.factor(M.data)
+            assert ldl.threads_used == (threads if pardiso.threaded() else 1) and ldl.negative == indefinite
             solutions.append([ldl.solve(b) for b in rhs])
             for b, y in zip(rhs, solutions[-1]):
-                assert y.shape == b.shape and np.linalg.norm(H @ y - b) <= 1e-10 * np.linalg.norm(b)
+                assert y.shape == b.shape and np.linalg.norm(M @ y - b) <= 1e-10 * np.linalg.norm(b)
         assert all(np.array_equal(y0, y) for ys in solutions[1:] for y0, y in zip(solutions[0], ys))
 
     monkeypatch.setenv("TENDON_TAICHI_FACTOR_THREADS", "3")

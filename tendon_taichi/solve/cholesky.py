@@ -28,11 +28,16 @@ class LDL:
     them)."""
 
     def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int, reorder: bool = False):
+        self._pattern = (indptr, indices, n)
         self.upper, self.indices, self.indptr = triangle(indptr, indices, n)
         self.n = n
         self.reorder = reorder
         self.solver = None
         self.generation = 0
+
+    def blank(self) -> "LDL":
+        """An LDL of the same pattern, not factorized."""
+        return LDL(*self._pattern, reorder=self.reorder)
 
     def factor(self, data: np.ndarray) -> bool:
         """Factorize the matrix of entries ``data`` (in the pattern's order); whether

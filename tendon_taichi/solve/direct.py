@@ -5,9 +5,11 @@ only the numbers afterwards; where MKL is installed, by PARDISO's supernodal
 Cholesky instead - a fiber lattice in that order, a tendon robot in PARDISO's
 own minimum degree order (:attr:`_Pattern.reorder`): :mod:`.pardiso`) where
 the matrix is positive definite - at and near a stable equilibrium, almost
-always - and by SuperLU with pivoting where it is not (an LDL^T with a pivot
-<= 0 proves it: by Sylvester's law of inertia D has as many negative entries as
-the matrix has negative eigenvalues).
+always - and where it is not (an LDL^T with a pivot <= 0 proves it: by
+Sylvester's law of inertia D has as many negative entries as the matrix has
+negative eigenvalues) by PARDISO's symmetric indefinite factorization where MKL
+is installed, else - and where that would perturb a pivot - by SuperLU with
+pivoting.
 
 A many-segment cable (a tendon) couples every node along it through its axial
 stiffness ``kc g g^T`` (``g = dL/dx``, ``L`` its weighted length): a dense
@@ -65,14 +67,19 @@ class Assembled:
 class Factorization:
     """A factorization of an :class:`Assembled` Hessian's sparse part - LDL^T
     (``ldl``, an :class:`LDL` of its pattern, or a
-    :class:`~tendon_taichi.solve.pardiso.PardisoLDL`) where it is positive definite, else
-    SuperLU - with the low-rank part by Woodbury's identity; :meth:`solve` works
-    in the free-DOF numbering (``order`` maps it to the ordered one)."""
+    :class:`~tendon_taichi.solve.pardiso.PardisoLDL`) where it is positive definite,
+    else PARDISO's symmetric indefinite factorization (``indefinite``, where MKL is
+    installed) where it needs no perturbed pivot, else SuperLU - with the low-rank
+    part by Woodbury's identity; :meth:`solve` works in the free-DOF numbering
+    (``order`` maps it to the ordered one)."""
 
-    def __init__(self, H: Assembled, order: np.ndarray, ldl: LDL | PardisoLDL | None = None):
+    def __init__(self, H: Assembled, order: np.ndarray, ldl: LDL | PardisoLDL | None = None,
+                 indefinite: PardisoLDL | None = None):
         self.Hp, self.ldl, self.lu = H.Hp, None, None
         if ldl is not None and H.Hp.shape[0] and ldl.factor(H.Hp.data):
             self.ldl, self.generation = ldl, ldl.generation
+        elif indefinite is not None and H.Hp.shape[0] and indefinite.factor(H.Hp.data):
+            self.ldl, self.generation = indefinite, indefinite.generation
         else:
             try:
                 self.lu = spla.splu(H.Hp, permc_spec="NATURAL", diag_pivot_thresh=0.1,
@@ -90,7 +97,7 @@ class Factorization:
         if self.lu is not None:
             return self.lu.solve(b)
         if self.ldl.generation != self.generation:  # the shared factors moved on: factorize a copy of its own
-            own = type(self.ldl)(self.Hp.indptr, self.Hp.indices, self.Hp.shape[0], self.ldl.reorder)
+            own = self.ldl.blank()
             own.factor(self.Hp.data)
             self.ldl, self.generation = own, own.generation
         return self.ldl.solve(b)
@@ -157,7 +164,8 @@ class _Pattern:
     CSC entries (``indices``, ``indptr``), or ``nnz`` for an entry on a fixed DOF (a
     bin the assembly drops), ``reorder`` whether ``order`` leaves couplings out (a
     tendon robot's: the elements' order), so that the Cholesky orders the pattern
-    again, and the :class:`LDL` of the pattern once one was made."""
+    again, the :class:`LDL` of the pattern once one was made and its PARDISO
+    indefinite factorization once one was needed."""
 
     order: np.ndarray
     scatter: np.ndarray
@@ -166,6 +174,7 @@ class _Pattern:
     nnz: int
     reorder: bool
     ldl: LDL | None = None
+    indefinite: PardisoLDL | None = None
 
     @cached_property
     def keys(self) -> np.ndarray:
@@ -234,7 +243,7 @@ class DirectSolver(LinearSolver):
             return self._pattern()
         shared = _SHARED_PATTERNS.setdefault(self.model.mesh, {})
         made = _recent(shared, (self.free.tobytes(), self.ordered, key), self._pattern, PATTERNS_SHARED)
-        return replace(made, ldl=None)
+        return replace(made, ldl=None, indefinite=None)
 
     def _pattern(self) -> _Pattern:
         """The pattern of the element and segment entries (``self.sdofs``)."""
@@ -413,9 +422,13 @@ class DirectSolver(LinearSolver):
 
     def factorize(self, H: Assembled) -> Factorization:
         """Factorize an ordered Hessian (:meth:`assemble_ordered`)."""
-        if self.pattern.ldl is None:
-            self.pattern.ldl = cholesky_class()(self.indptr, self.indices, self.shape[0], self.pattern.reorder)
-        return Factorization(H, self.order, self.pattern.ldl)
+        pattern = self.pattern
+        if pattern.ldl is None:
+            pattern.ldl = cholesky_class()(self.indptr, self.indices, self.shape[0], pattern.reorder)
+        if pattern.indefinite is None and isinstance(pattern.ldl, PardisoLDL):
+            pattern.indefinite = PardisoLDL(self.indptr, self.indices, self.shape[0], pattern.reorder,
+                                            indefinite=True)
+        return Factorization(H, self.order, pattern.ldl, pattern.indefinite)
 
     def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:
         lu = self.factorize(H)

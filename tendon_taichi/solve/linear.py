@@ -14,7 +14,8 @@ is the operator, its state is passed in. The backends by name (:data:`SOLVERS`):
   V-cycle over the body's coarser meshes (no factorization but the coarsest);
 * ``cg-jacobi`` - block-Jacobi PCG entirely in Taichi;
 * ``direct`` - the Hessian assembled into a scipy sparse matrix and
-  factorized (LDL^T, or SuperLU where it is not positive definite);
+  factorized (LDL^T; where it is not positive definite PARDISO's indefinite
+  LDL^T, or SuperLU);
 * ``auto`` - ``direct`` up to :data:`AUTO_DIRECT_MAX_DOFS` free DOFs, ``cg`` above.
 """
 

@@ -7,6 +7,20 @@ supernodal Cholesky: dense BLAS-3 blocks where qdldl's up-looking LDL^T works
 entry by entry. Its analysis (the symbolic factorization) runs once per
 sparsity pattern; each factorization after that computes only the numbers.
 
+Indefinite matrices. Far from equilibrium (a route optimization's trial step,
+a compressed body) the Hessian's sparse part may have negative eigenvalues:
+the Cholesky stops at a pivot <= 0. Such a matrix is factorized by PARDISO's
+symmetric indefinite LDL^T (``mtype`` -2, Bunch-Kaufman 1x1 and 2x2 pivots
+within its supernodes, ``indefinite``), which counts the negative eigenvalues
+(:attr:`PardisoLDL.negative`). Where even those pivots leave one too small
+(``iparm[9]``: below 1e-8 of the matrix) it would perturb that pivot and solve
+a slightly different matrix; it refuses instead, and the direct backend takes
+SuperLU, which pivots across the whole matrix. On the 35 route optimizations of
+``design t_shape --resolution 3`` (``benchmarks/route_replay.py``) a factorization
+that was not positive definite took 20.4 ms with SuperLU (the failed Cholesky
+included), 7.8 ms this way (its analysis once per pattern included); on 160
+such matrices of level 2, SuperLU 3.7 ms, PARDISO 0.7 ms (2.2 ms with the analysis).
+
 The ordering. A fiber lattice's matrix comes in the direct backend's
 fill-reducing order of its whole pattern (minimum degree, computed once per
 model), and PARDISO keeps it (an identity ``perm``, ``iparm[4] = 1``): it then
@@ -185,11 +199,13 @@ class PardisoLDL:
     backend's qdldl :class:`~tendon_taichi.solve.cholesky.LDL`. The pattern is
     factorized in its own order, or with ``reorder`` in PARDISO's minimum degree
     order of it (module docstring), in the reproducible mode or not
-    (``reproducible``, default: from :data:`PARALLEL_MIN` DOFs). One
-    factorization is current at a time (``generation`` counts them)."""
+    (``reproducible``, default: from :data:`PARALLEL_MIN` DOFs); with
+    ``indefinite`` by the symmetric indefinite LDL^T instead of Cholesky (module
+    docstring). One factorization is current at a time (``generation`` counts them)."""
 
     def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int, reorder: bool = False,
-                 reproducible: bool | None = None):
+                 reproducible: bool | None = None, indefinite: bool = False):
+        self._pattern = (indptr, indices, n)
         # the lower triangle by columns is the upper triangle by rows, as PARDISO takes it
         self.lower, ja, self.ia = triangle(indptr, indices, n, lower=True)
         self.ja = np.ascontiguousarray(ja, dtype=np.int32)
@@ -208,10 +224,20 @@ class PardisoLDL:
         self._iparm[4] = 0 if reorder else 1
         self._iparm[17] = -1  # report the factor's entries (:attr:`entries`)
         self._iparm[33] = CNR if self.reproducible else 0
+        #: the symmetric indefinite LDL^T (``mtype`` -2) instead of Cholesky
+        self.indefinite = bool(indefinite)
+        if self.indefinite:
+            self._iparm[9] = 8  # a pivot below 1e-8 |A| would be perturbed: the factorization is refused
+            self._iparm[20] = 1  # 1x1 and 2x2 Bunch-Kaufman pivots
         self._perm = np.arange(n, dtype=np.int32)
         self._data = np.zeros(len(self.ja))
         self._analyzed = False  # phase 11 done (and its memory to release)
         self._args = None  # the call's fixed arguments (:meth:`_fixed_args`)
+
+    def blank(self) -> "PardisoLDL":
+        """A handle of the same pattern and settings, neither analyzed nor factorized."""
+        return PardisoLDL(*self._pattern, reorder=self.reorder, reproducible=self.reproducible,
+                          indefinite=self.indefinite)
 
     def _fixed_args(self) -> tuple:
         """The call's arguments that stay the same from call to call, made once (a
@@ -221,7 +247,8 @@ class PardisoLDL:
         for an absent ``b`` or ``x``."""
         if self._args is None:
             ptr, one = ctypes.c_void_p, ctypes.byref(ctypes.c_int32(1))
-            self._args = ((ptr(self._pt.ctypes.data), one, one, ctypes.byref(ctypes.c_int32(2))),
+            mtype = ctypes.byref(ctypes.c_int32(-2 if self.indefinite else 2))
+            self._args = ((ptr(self._pt.ctypes.data), one, one, mtype),
                           (ctypes.byref(ctypes.c_int32(self.n)), ptr(self._data.ctypes.data),
                            ptr(self.ia.ctypes.data), ptr(self.ja.ctypes.data), ptr(self._perm.ctypes.data), one,
                            ptr(self._iparm.ctypes.data), ctypes.byref(ctypes.c_int32(0))),
@@ -251,15 +278,22 @@ class PardisoLDL:
         return int(self._iparm[17]) if self._analyzed else 0
 
     @property
+    def negative(self) -> int:
+        """The negative eigenvalues of the last matrix factorized (its inertia), as the
+        indefinite factorization counts them; 0 for a Cholesky that succeeded."""
+        return int(self._iparm[22]) if self.indefinite else 0
+
+    @property
     def threads_used(self) -> int:
         """The threads PARDISO ran its last phase on, as it reports them."""
         return int(self._iparm[2])
 
     def factor(self, data: np.ndarray) -> bool:
         """Factorize the matrix of entries ``data`` (in the pattern's order); whether
-        it is positive definite (PARDISO's Cholesky met no pivot <= 0: its error -4),
-        else the factors are not to be used (and the direct backend takes SuperLU,
-        as it does where PARDISO fails otherwise, e.g. out of memory)."""
+        it is positive definite (PARDISO's Cholesky met no pivot <= 0: its error -4)
+        - with ``indefinite``: whether no pivot was perturbed -, else the factors are
+        not to be used (and the direct backend takes the next factorization, as it
+        does where PARDISO fails otherwise, e.g. out of memory)."""
         np.take(data, self.lower, out=self._data, mode="clip")  # positions in range: no bounds check
         if not self._analyzed:
             if self._call(11)[0]:
@@ -267,7 +301,7 @@ class PardisoLDL:
             self._analyzed = True
         err, _ = self._call(22)
         self.generation += 1
-        return err == 0
+        return err == 0 and not (self.indefinite and self._iparm[13] > 0)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """A^-1 b with the current factorization, b (n,), or (n, r): r columns in one
