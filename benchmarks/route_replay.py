@@ -13,11 +13,12 @@ the pattern where it lacks the entries of at most ``DETACHED_MAX`` segments
 calls, then per setting the median time, the evaluations and the milliseconds
 per evaluation (the optimizations take their own paths from the same starts:
 the Hessians agree to round-off), and how closely the summed objectives agree.
-Those paths split: the equilibria agree to their tolerance, not to the last
-bit, and after 50-90 evaluations SLSQP's line search turns a difference of
-about 1e-8 of the objective into another step, so an optimization can end
-elsewhere (on t_shape at level 1, one of 20 ended 1.2 % apart). What the
-setting must not change is the objective and its gradient at a point: so it
+Those paths split: SLSQP's steps amplify the two settings' differences of
+round-off (at one point, about 1e-12 of the objective and 1e-10 of the
+gradient), its points drift apart by up to 1e-9, and after 50-90 evaluations a
+line search decides otherwise, so an optimization can end elsewhere (on
+t_shape at level 1, one of 20 ended 1.2 % apart). What the setting must not
+change is the objective and its gradient at a point: so it
 also evaluates every point the default setting's optimizations evaluated again,
 in the same order (the same warm starts), with every pattern made anew, and
 prints how closely the objectives and gradients agree at the same points.

@@ -100,7 +100,7 @@ def test_route_replay_runs_every_route_optimization_both_ways():
     assert all(int(ln.split(", ")[1].split()[0]) > 0 for ln in out[1:3])  # evaluations
     assert out[3].startswith("summed objectives agree to:")
     # the Hessians equal to round-off: the same objective and gradient at every point the
-    # optimizations asked for (their own paths split where SLSQP meets the equilibria's tolerance)
+    # optimizations asked for (their own paths split where SLSQP's steps amplify the round-off)
     words = out[4].replace(",", "").split()
     assert out[4].startswith("at the same points:") and int(words[-2].lstrip("(")) > 0
     assert float(words[7]) <= 1e-9 and float(words[10]) <= 1e-7
