@@ -391,7 +391,8 @@ def test_pardisos_indefinite_factorization_counts_the_inertia_and_refuses_a_pert
     singular = sp.csc_matrix(np.array([[1.0, 1.0, 0.0], [1.0, 1.0 + 1e-13, 0.0], [0.0, 0.0, -1.0]]))
     handles = [pardiso.PardisoLDL(singular.indptr, singular.indices, 3, indefinite=flag) for flag in (False, True)]
     assert not handles[1].factor(singular.data)  # a pivot of 1e-13: perturbed, so refused
-    fac = Factorization(Assembled(singular, np.zeros((3, 0)), np.zeros(0)), np.arange(3), *handles)
+    fac = Factorization(Assembled(singular, np.zeros((3, 0)), np.zeros(0)), np.arange(3), handles[0],
+                        lambda: handles[1])
     assert fac.ldl is None and fac.lu is not None
 
 

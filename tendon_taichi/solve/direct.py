@@ -30,8 +30,8 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass, replace
-from functools import cached_property
-from typing import Iterable, Iterator
+from functools import cached_property, partial
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 import scipy.sparse as sp
@@ -68,24 +68,26 @@ class Factorization:
     """A factorization of an :class:`Assembled` Hessian's sparse part - LDL^T
     (``ldl``, an :class:`LDL` of its pattern, or a
     :class:`~tendon_taichi.solve.pardiso.PardisoLDL`) where it is positive definite,
-    else PARDISO's symmetric indefinite factorization (``indefinite``, where MKL is
-    installed) where it needs no perturbed pivot, else SuperLU - with the low-rank
-    part by Woodbury's identity; :meth:`solve` works in the free-DOF numbering
-    (``order`` maps it to the ordered one)."""
+    else PARDISO's symmetric indefinite factorization (``indefinite()``, asked for
+    only then: None where MKL is not installed) where it needs no perturbed pivot,
+    else SuperLU - with the low-rank part by Woodbury's identity; :meth:`solve`
+    works in the free-DOF numbering (``order`` maps it to the ordered one)."""
 
     def __init__(self, H: Assembled, order: np.ndarray, ldl: LDL | PardisoLDL | None = None,
-                 indefinite: PardisoLDL | None = None):
+                 indefinite: Callable[[], PardisoLDL | None] | None = None):
         self.Hp, self.ldl, self.lu = H.Hp, None, None
         if ldl is not None and H.Hp.shape[0] and ldl.factor(H.Hp.data):
             self.ldl, self.generation = ldl, ldl.generation
-        elif indefinite is not None and H.Hp.shape[0] and indefinite.factor(H.Hp.data):
-            self.ldl, self.generation = indefinite, indefinite.generation
         else:
-            try:
-                self.lu = spla.splu(H.Hp, permc_spec="NATURAL", diag_pivot_thresh=0.1,
-                                    options={"SymmetricMode": True})
-            except RuntimeError as exc:  # exactly singular
-                raise np.linalg.LinAlgError(str(exc)) from None
+            other = indefinite() if indefinite is not None and H.Hp.shape[0] else None
+            if other is not None and other.factor(H.Hp.data):
+                self.ldl, self.generation = other, other.generation
+            else:
+                try:
+                    self.lu = spla.splu(H.Hp, permc_spec="NATURAL", diag_pivot_thresh=0.1,
+                                        options={"SymmetricMode": True})
+                except RuntimeError as exc:  # exactly singular
+                    raise np.linalg.LinAlgError(str(exc)) from None
         self.order = order
         self.U = H.U
         if len(H.K):
@@ -181,6 +183,16 @@ class _Pattern:
         """The entries' sorted keys ``col nf + row`` (ordered numbering), (nnz,)."""
         nf = len(self.indptr) - 1
         return np.repeat(np.arange(nf, dtype=np.int64), np.diff(self.indptr)) * nf + self.indices
+
+
+def _indefinite(pattern: _Pattern) -> PardisoLDL | None:
+    """The pattern's PARDISO indefinite factorization, made the first time a matrix
+    of it is not positive definite (a new pattern's Cholesky almost always
+    succeeds); None where its Cholesky is qdldl's (no MKL)."""
+    if pattern.indefinite is None and isinstance(pattern.ldl, PardisoLDL):
+        pattern.indefinite = PardisoLDL(pattern.indptr, pattern.indices, len(pattern.indptr) - 1,
+                                        pattern.reorder, indefinite=True)
+    return pattern.indefinite
 
 
 class DirectSolver(LinearSolver):
@@ -425,10 +437,7 @@ class DirectSolver(LinearSolver):
         pattern = self.pattern
         if pattern.ldl is None:
             pattern.ldl = cholesky_class()(self.indptr, self.indices, self.shape[0], pattern.reorder)
-        if pattern.indefinite is None and isinstance(pattern.ldl, PardisoLDL):
-            pattern.indefinite = PardisoLDL(self.indptr, self.indices, self.shape[0], pattern.reorder,
-                                            indefinite=True)
-        return Factorization(H, self.order, pattern.ldl, pattern.indefinite)
+        return Factorization(H, self.order, pattern.ldl, partial(_indefinite, pattern))
 
     def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:
         lu = self.factorize(H)
