@@ -35,7 +35,7 @@ def test_every_script_has_a_test():
               "planted_results/make_results.py", "hostile_input/make_table.py", "bench/versus_commit.py",
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
               "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py",
-              "warm_newton.py", "auto_solver.py", "assembly.py", "multigrid.py", "pardiso_modes.py",
+              "warm_newton.py", "warm_parts.py", "auto_solver.py", "assembly.py", "multigrid.py", "pardiso_modes.py",
               "route_gradients.py"}
     assert scripts == tested
 
@@ -131,6 +131,21 @@ def test_warm_newton_traces_both_warm_solves_per_level():
         loose = int(cols[7])
         assert 1 <= loose <= steps and residuals[loose - 1] > 1e-8 >= residuals[loose]
         assert int(cols[9]) >= 1 and int(cols[10]) >= 0  # the optimizer's chord steps, factorizations
+
+
+def test_warm_parts_splits_the_warm_equilibrium_into_parts_that_add_up():
+    out = run(BENCH / "warm_parts.py", "t_shape", "--levels", 1, 2, "--repeat", 2).stdout.splitlines()
+    head = out[0].split()
+    assert head[:5] == ["level", "DOFs", "steps", "factors", "entries"] and head[5] == "total"
+    for level, line in zip((1, 2), out[1:3]):
+        cols = line.split()
+        assert int(cols[0]) == level and int(cols[2]) >= 1
+        assert int(cols[3]) == int(cols[2])  # plain exact Newton: one factorization per step
+        total, parts = float(cols[5]), [float(v) for v in cols[6:]]
+        assert len(parts) == 6 and all(v >= 0 for v in parts) and parts[0] > 0 and parts[2] > 0
+        assert abs(sum(parts) - total) <= 0.04  # the rest is what the parts leave (to the printed 0.01 ms)
+    assert out[3].startswith("exponents: total") and out[4].startswith("per factorization: ")
+    assert "linear rest: " in out[4]
 
 
 def test_simulate_levels_prints_each_level_and_solver():
