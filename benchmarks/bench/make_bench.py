@@ -61,7 +61,10 @@ the same run; `forward`, the same gradient
 by one solve per fiber (where that finishes in reasonable time); `optimize`, the
 whole regularized optimization with the backend `--solver auto` picks at that
 size; `mem MB`, the process's peak resident memory. Exponents are least-squares
-slopes of log(time) against log(DOFs) over the levels from the second on.
+slopes of log(time) against log(DOFs) over the levels from the second on. Where
+`eq warm`'s time goes, part by part (the factorizations, their solves, the
+assembly), and why `direct`'s grows faster than the DOFs: "Where a warm
+equilibrium's time goes" in [method.md](method.md) (`benchmarks/warm_parts.py`).
 """
 
 
