@@ -102,6 +102,7 @@ def measure(scene, level: int, repeat: int) -> dict:
 
 
 def slope(dofs: list[int], times: list[float]) -> float:
+    """Least-squares slope of log(time) against log(DOFs)."""
     return float(np.polyfit(np.log(dofs), np.log(times), 1)[0])
 
 
@@ -130,7 +131,7 @@ def main(argv=None) -> int:
         base = fit[0]
         per_dof = (base["total"] - base["factor"] - base["solves"]) / base["dofs"]
         bound = [r["factor"] + r["solves"] + per_dof * r["dofs"] for r in fit]
-        one = slope(dofs, [r["factor"] / r["factorizations"] for r in fit])
+        one = slope(dofs, [r["factor"] / max(r["factorizations"], 1) for r in fit])
         print(f"per factorization: {one:.2f}, linear rest: {slope(dofs, bound):.2f}")
     return 0
 
