@@ -22,7 +22,12 @@ change is the objective and its gradient at a point: so it
 also evaluates every point the default setting's optimizations evaluated again,
 in the same order (the same warm starts), with every pattern made anew, and
 prints how closely the objectives and gradients agree at the same points.
-docs/method.md ("Route optimization") quotes its figures for t_shape at level 3.
+Last, where PARDISO loads (the ``mkl`` extra), the calls again with each way of
+factorizing a Hessian that is not positive definite - PARDISO's symmetric
+indefinite LDL^T (the default) and SuperLU - alternating, N times: how many such
+factorizations the optimizations met and their median time each (the failed
+Cholesky included). docs/method.md ("Route optimization", the direct backend)
+quotes its figures for t_shape at level 3.
 """
 
 import sys
@@ -35,7 +40,7 @@ import scipy.optimize as so
 from tendon_taichi.cli import main
 from tendon_taichi.extract import consolidation, routing
 from tendon_taichi.physics import runtime
-from tendon_taichi.solve import direct
+from tendon_taichi.solve import direct, pardiso
 
 from _scene_args import scene_args
 
@@ -141,6 +146,29 @@ def same_points(calls: list[tuple], reference: int, other: int) -> tuple[float, 
     return worst[0], worst[1], worst[2]
 
 
+def indefinite_replay(calls: list[tuple], way: str) -> tuple[float, int]:
+    """Every call again, the Hessians that are not positive definite factorized
+    ``way`` ("PARDISO": its indefinite LDL^T, "SuperLU"): the median time of such a
+    factorization (s; the failed Cholesky included) and how many there were."""
+    made, init, pick = [], direct.Factorization.__init__, direct._indefinite
+
+    def timed(self, H, *args, **kwargs):
+        t0 = time.perf_counter()
+        init(self, H, *args, **kwargs)
+        if self.ldl is not (args[1] if len(args) > 1 else kwargs.get("ldl")):  # not the Cholesky
+            made.append(time.perf_counter() - t0)
+
+    direct.Factorization.__init__ = timed
+    if way == "SuperLU":
+        direct._indefinite = lambda pattern: None
+    try:
+        for args, kwargs in calls:
+            routing.optimize_routes(*args, **kwargs)
+    finally:
+        direct.Factorization.__init__, direct._indefinite = init, pick
+    return (float(np.median(made)) if made else 0.0), len(made)
+
+
 def alternating(calls: list[tuple], settings: dict, replay, repeat: int) -> dict[str, list]:
     """``replay(calls, value)`` ``repeat`` times for each ``settings`` label and value,
     the settings alternating, one thread per factorization (as in design's
@@ -167,6 +195,11 @@ def run(argv: list[str]) -> None:
     print(f"summed objectives agree to: {abs(anew - detached) / abs(anew):.1e} (relative difference)")
     f, g, n = same_points(calls, direct.DETACHED_MAX, 0)
     print(f"at the same points: objectives agree to {f:.1e}, gradients to {g:.1e} of the first ({n} evaluations)")
+    if pardiso.available():
+        ways = alternating(calls, {"PARDISO": "PARDISO", "SuperLU": "SuperLU"}, indefinite_replay, repeat)
+        print("not positive definite: " + ", ".join(
+            f"{way} {1e3 * float(np.median([r[0] for r in done])):.2f} ms each ({done[0][1]})"
+            for way, done in ways.items()))
 
 
 if __name__ == "__main__":

@@ -94,7 +94,8 @@ def test_secant_replay_solves_the_same_evaluations_both_ways():
 
 
 def test_route_replay_runs_every_route_optimization_both_ways():
-    out = run(BENCH / "route_replay.py", "t_shape", 1, *SHORT_DESIGN, "--repeat", 1).stdout.splitlines()[-5:]
+    lines = run(BENCH / "route_replay.py", "t_shape", 1, *SHORT_DESIGN, "--repeat", 1).stdout.splitlines()
+    out = lines[next(i for i, ln in enumerate(lines) if ln.startswith("route optimizations:")):]
     assert out[0].startswith("route optimizations:") and int(out[0].split()[2]) > 0
     assert out[1].startswith("every pattern made anew:") and out[2].startswith("detached segments:")
     assert all(int(ln.split(", ")[1].split()[0]) > 0 for ln in out[1:3])  # evaluations
@@ -104,6 +105,17 @@ def test_route_replay_runs_every_route_optimization_both_ways():
     words = out[4].replace(",", "").split()
     assert out[4].startswith("at the same points:") and int(words[-2].lstrip("(")) > 0
     assert float(words[7]) <= 1e-9 and float(words[10]) <= 1e-7
+    from tendon_taichi.solve import pardiso
+
+    if not pardiso.available():  # the indefinite factorization is PARDISO's: nothing to compare
+        assert len(out) == 5
+        return
+    assert len(out) == 6 and out[5].startswith("not positive definite: PARDISO ")
+    ways = dict(part.split(" ", 1) for part in out[5].split(": ", 1)[1].split(", "))
+    assert sorted(ways) == ["PARDISO", "SuperLU"]
+    for way in ways.values():  # "1.23 ms each (12)": each time > 0 where there were any
+        ms, count = float(way.split()[0]), int(way.split("(")[1].rstrip(")"))
+        assert count >= 0 and (ms > 0) == (count > 0)
 
 
 def test_extension_screen_finishes_every_extension_in_full_too():

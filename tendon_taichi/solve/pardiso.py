@@ -15,11 +15,11 @@ within its supernodes, ``indefinite``), which counts the negative eigenvalues
 (:attr:`PardisoLDL.negative`). Where even those pivots leave one too small
 (``iparm[9]``: below 1e-8 of the matrix) it would perturb that pivot and solve
 a slightly different matrix; it refuses instead, and the direct backend takes
-SuperLU, which pivots across the whole matrix. On the 35 route optimizations of
-``design t_shape --resolution 3`` (``benchmarks/route_replay.py``) a factorization
-that was not positive definite took 20.4 ms with SuperLU (the failed Cholesky
-included), 7.8 ms this way (its analysis once per pattern included); on 160
-such matrices of level 2, SuperLU 3.7 ms, PARDISO 0.7 ms (2.2 ms with the analysis).
+SuperLU, which pivots across the whole matrix. On the 33 route optimizations of
+``design t_shape --resolution 3`` (``python benchmarks/route_replay.py t_shape 3``,
+at fe418fd) the 148 factorizations that were not positive definite took 7.52 ms
+each this way (the failed Cholesky and the analysis once per pattern included),
+9.84 ms with SuperLU; at level 1, 2.18 against 2.28 ms.
 
 The ordering. A fiber lattice's matrix comes in the direct backend's
 fill-reducing order of its whole pattern (minimum degree, computed once per
