@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tendon_taichi.solve import pardiso
+
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "benchmarks"
 #: a short optimization that still ends sparse (a dense pattern would make consolidation slow)
@@ -105,8 +107,6 @@ def test_route_replay_runs_every_route_optimization_both_ways():
     words = out[4].replace(",", "").split()
     assert out[4].startswith("at the same points:") and int(words[-2].lstrip("(")) > 0
     assert float(words[7]) <= 1e-9 and float(words[10]) <= 1e-7
-    from tendon_taichi.solve import pardiso
-
     if not pardiso.available():  # the indefinite factorization is PARDISO's: nothing to compare
         assert len(out) == 5
         return

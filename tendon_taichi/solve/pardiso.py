@@ -19,7 +19,7 @@ SuperLU, which pivots across the whole matrix. On the 33 route optimizations of
 ``design t_shape --resolution 3`` (``python benchmarks/route_replay.py t_shape 3``,
 at fe418fd) the 148 factorizations that were not positive definite took 7.52 ms
 each this way (the failed Cholesky and the analysis once per pattern included),
-9.84 ms with SuperLU; at level 1, 2.18 against 2.28 ms.
+9.84 ms with SuperLU.
 
 The ordering. A fiber lattice's matrix comes in the direct backend's
 fill-reducing order of its whole pattern (minimum degree, computed once per
