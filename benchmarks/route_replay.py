@@ -152,10 +152,10 @@ def indefinite_replay(calls: list[tuple], way: str) -> tuple[float, int]:
     factorization (s; the failed Cholesky included) and how many there were."""
     made, init, pick = [], direct.Factorization.__init__, direct._indefinite
 
-    def timed(self, H, *args, **kwargs):
+    def timed(self, *args, **kwargs):
         t0 = time.perf_counter()
-        init(self, H, *args, **kwargs)
-        if self.ldl is not (args[1] if len(args) > 1 else kwargs.get("ldl")):  # not the Cholesky
+        init(self, *args, **kwargs)
+        if self.ldl is None or self.ldl.indefinite:  # SuperLU's or the indefinite LDL^T: not the Cholesky
             made.append(time.perf_counter() - t0)
 
     direct.Factorization.__init__ = timed
