@@ -2,6 +2,7 @@
 module imports itself in a circle, the plugin protocol stays free of Taichi,
 no module grows past 600 lines, and the documents the code and docs cite exist."""
 
+import argparse
 import ast
 import re
 import subprocess
@@ -178,3 +179,23 @@ def test_the_readme_is_short_and_points_into_docs():
     for doc in ("method", "cli", "scenes", "formats", "plugins"):
         assert f"docs/{doc}.md" in readme, doc
         assert (ROOT / "docs" / f"{doc}.md").is_file(), doc
+
+
+def _subcommands():
+    from tendon_taichi.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices
+
+
+def test_every_command_names_the_level_by_one_flag():
+    """A command that takes a resolution level takes it as ``--level`` (``--resolution``,
+    its former name, only beside it), and no other option holds a level."""
+    with_level = set()
+    for name, parser in _subcommands().items():
+        for action in parser._actions:
+            names = [o for o in action.option_strings if o.startswith("--")]
+            if "--resolution" in names or action.dest in ("level", "resolution"):
+                assert names[:2] == ["--level", "--resolution"] and action.dest == "level", (name, names)
+                with_level.add(name)
+    assert {"design", "optimize", "simulate", "planted", "planted-bench", "bench"} <= with_level, with_level

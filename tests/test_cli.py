@@ -112,7 +112,8 @@ def test_malformed_scene_gives_one_line_and_writes_nothing(cli, tmp_path, case):
 @pytest.mark.parametrize("args,message", [
     (["simulate", "nope", "--uniform", 0.1], "unknown scene 'nope'"),
     (["simulate", "t_shape", "--uniform", 0.5], "must lie in [-0.5, 0.33]"),
-    (["simulate", "t_shape", "--uniform", 0.1, "--resolution", 0], "--resolution must be >= 1"),
+    (["simulate", "t_shape", "--uniform", 0.1, "--level", 0], "--level must be >= 1"),
+    (["simulate", "t_shape", "--uniform", 0.1, "--resolution", 0], "--level must be >= 1"),
     (["simulate", "t_shape"], "one of the arguments --uniform --contract is required"),
     (["simulate", "t_shape", "--contract", "missing.npy"], "does not exist"),
     (["simulate", "t_shape", "--uniform", 0.1, "--solver", "lu"], "invalid choice"),

@@ -111,7 +111,7 @@ def test_planted_bench_command_on_one_case(tmp_path):
     most planted + 1 tendons, its as-built robot reaches the goals within 1 % of L,
     it meets the route rule, and the outputs are all there."""
     out = tmp_path / "pb"
-    r = _cli("planted-bench", SUITE, "--cases", "snake_planted_1t_s1", "--resolution", "1", "--out", out, "--json")
+    r = _cli("planted-bench", SUITE, "--cases", "snake_planted_1t_s1", "--level", "1", "--out", out, "--json")
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
     assert "[1/1] snake_planted_1t_s1" in r.stderr
@@ -150,7 +150,8 @@ def test_planted_bench_command_on_one_case(tmp_path):
     (["/no/such/suite"], "not a folder"),
     ([str(SUITE), "--cases", "nope"], "no such case"),
     ([str(SUITE), "--sparsity", "-1"], "sparsity"),
-    ([str(SUITE), "--levels", "1", "0"], "--resolution and --levels must be >= 1"),
+    ([str(SUITE), "--levels", "1", "0"], "--level must be >= 1 (got 0)"),
+    ([str(SUITE), "--level", "1", "0"], "--level must be >= 1 (got 0)"),
     ([str(SUITE), "--levels", "1", "--resolution", "3"], "not allowed with argument"),
     ([str(SUITE), "--beam", "0"], "--beam must be an integer >= 1"),
 ])

@@ -263,8 +263,8 @@ def test_resume_refuses_another_resolution_solver_or_scene(tmp_path, cli, refere
     rec = tmp_path / "run.rrd"
     rec.write_bytes(path.read_bytes())
     other = "cg" if ref["solver"] != "cg" else "direct"
-    _one_line_error(cli("optimize", "--resume", rec, "--resolution", "2", cwd=tmp_path),
-                    f"--resolution 2 cannot be changed when resuming (the run is at level {ref['resolution']})")
+    _one_line_error(cli("optimize", "--resume", rec, "--level", "2", cwd=tmp_path),
+                    f"--level 2 cannot be changed when resuming (the run is at level {ref['resolution']})")
     _one_line_error(cli("optimize", "--resume", rec, "--solver", other, cwd=tmp_path),
                     f"--solver {other} cannot be changed when resuming (the run used {ref['solver']})")
     _one_line_error(cli("optimize", "finger", "--resume", rec, cwd=tmp_path),

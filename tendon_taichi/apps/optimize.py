@@ -202,7 +202,7 @@ def _check_resumable(run: RecordedRun, level: int | None, solver: str | None, sc
         raise InputError(f"scene '{scene.name}' is not the one '{run.path}' ran: its TOML text differs "
                          f"(leave SCENE out to resume the recorded one)")
     if level is not None and meta.get("resolution") is not None and level != meta["resolution"]:
-        raise InputError(f"--resolution {level} cannot be changed when resuming "
+        raise InputError(f"--level {level} cannot be changed when resuming "
                          f"(the run is at level {meta['resolution']})")
     if solver not in (None, "auto") and meta.get("solver") not in (None, solver):
         raise InputError(f"--solver {solver} cannot be changed when resuming (the run used {meta['solver']})")

@@ -11,5 +11,5 @@ __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     ".mesh": ("Mesh", "Embedding", "triangulate_polygon", "read_mesh", "refine"),
     ".fibers": ("FiberGraph", "FiberPairs", "build_lattice"),
     ".cables": ("CableSet",),
-    ".problem": ("Problem", "build_problem"),
+    ".problem": ("Problem", "build_problem", "level_scale", "LevelScale"),
 })

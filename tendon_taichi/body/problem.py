@@ -128,17 +128,42 @@ class Problem:
                 "fibers": self.fibers.n_fibers, "dofs": int(2 * (~self.fixed).sum())}
 
 
+@dataclass(frozen=True)
+class LevelScale:
+    """How resolution ``level`` (1, 2, ...) scales the scene's sizes: each level
+    halves the largest triangle area and divides the fiber spacing (a length) by
+    sqrt(2). ``length`` and ``area`` are the divisors of a level-1 length and area."""
+
+    level: int
+
+    @property
+    def length(self) -> float:
+        """sqrt(2) ** (level - 1): a level-1 length over this level's."""
+        return np.sqrt(2.0) ** (self.level - 1)
+
+    @property
+    def area(self) -> int:
+        """2 ** (level - 1): a level-1 area over this level's."""
+        return 2 ** (self.level - 1)
+
+
+def level_scale(level: int) -> LevelScale:
+    """The one place a level's sizes are derived from level 1's (:class:`LevelScale`)."""
+    return LevelScale(int(level))
+
+
 def _mesh_for_level(scene: Scene, level: int) -> Mesh:
     """The body meshed at ``level``, once :func:`~tendon_taichi.body.size.check_size` allows it."""
     body = scene.body
-    spacing = scene.fibers.spacing / np.sqrt(2.0) ** (level - 1)
+    scale = level_scale(level)
+    spacing = scene.fibers.spacing / scale.length
     if body.mesh_file is None:
         area = abs(signed_area(body.outline)) - sum(abs(signed_area(h)) for h in body.holes)
-        check_size(scene.name, level, area, body.max_triangle_area / 2 ** (level - 1), spacing)
-        return triangulate_polygon(body.outline, body.holes, body.max_triangle_area / 2 ** (level - 1))
+        check_size(scene.name, level, area, body.max_triangle_area / scale.area, spacing)
+        return triangulate_polygon(body.outline, body.holes, body.max_triangle_area / scale.area)
     mesh = read_mesh(body.mesh_file)
     base = body.max_triangle_area or float(np.abs(mesh.areas).max())
-    area = base / 2 ** (level - 1)
+    area = base / scale.area
     check_size(scene.name, level, float(np.abs(mesh.areas).sum()), area, spacing)
     if level > 1 or np.abs(mesh.areas).max() > area * (1 + 1e-9):
         mesh = refine(mesh, area)
@@ -146,10 +171,10 @@ def _mesh_for_level(scene: Scene, level: int) -> Mesh:
 
 
 def build_problem(scene: Scene, level: int = 1) -> Problem:
-    """Mesh, rig and embed ``scene`` at resolution ``level`` (1, 2, ...): each level
-    halves the largest triangle area and divides the fiber spacing by sqrt(2)."""
+    """Mesh, rig and embed ``scene`` at resolution ``level`` (1, 2, ...), its sizes
+    scaled by :func:`level_scale`."""
     if not isinstance(level, (int, np.integer)) or level < 1:
-        raise SceneError(f"resolution must be an integer >= 1 (got {level!r})")
+        raise SceneError(f"the level must be an integer >= 1 (got {level!r})")
     mesh = _mesh_for_level(scene, int(level))
     L = mesh.size
     tol = 1e-9 * L
@@ -161,7 +186,7 @@ def build_problem(scene: Scene, level: int = 1) -> Problem:
                          "the body is not clamped")
     if fixed.all():
         raise SceneError(f"{scene.origin}: every mesh node lies in a [[fixed]] box: nothing can move")
-    spacing = scene.fibers.spacing / np.sqrt(2.0) ** (level - 1)
+    spacing = scene.fibers.spacing / level_scale(level).length
     fibers = build_lattice(mesh, spacing, tol)
     if fibers.n_fibers == 0:
         raise SceneError(f"{scene.origin}: no fiber fits inside the body at spacing {spacing:g} m")

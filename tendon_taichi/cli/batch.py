@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..files import file_stem
-from .common import SOLVER_CHOICES, add_json, json_out
+from .common import SOLVER_CHOICES, add_json, add_level_flag, json_out
 from .runs import add_optimize_flags, optimize_overrides
 from .tendons import (add_consolidation_flags, add_front_flags, add_tendon_flags, consolidation, front_settings,
                       tendon_settings)
@@ -21,14 +21,14 @@ def cmd_bench(args) -> int:
     from ..body.scene import load_scene
 
     scene = load_scene(args.scene)
-    if args.repeat < 1 or any(lv < 1 for lv in args.levels):
-        raise InputError("--repeat and --levels must be >= 1")
+    if args.repeat < 1:
+        raise InputError(f"--repeat must be >= 1 (got {args.repeat})")
     if args.forward_max_fibers < 0:
         raise InputError(f"--forward-max-fibers must be >= 0 (got {args.forward_max_fibers})")
     optimize_levels = [] if args.no_optimize else args.optimize_levels
     workers, scheduler = cluster_args(args)
     workers = 0 if workers is None and scheduler is None else workers
-    result = run_bench(scene, args.levels, args.solver, args.repeat, args.out, optimize_levels,
+    result = run_bench(scene, args.level, args.solver, args.repeat, args.out, optimize_levels,
                        args.forward_max_fibers, optimize_solver=args.optimize_solver, workers=workers,
                        scheduler=scheduler)
     json_out(args, result)
@@ -52,8 +52,6 @@ def cmd_planted(args) -> int:
         raise InputError(f"--tendons must be 1..{MAX_TENDONS} (got {args.tendons})")
     if args.seed < 0:
         raise InputError(f"--seed must be >= 0 (got {args.seed})")
-    if args.level < 1:
-        raise InputError(f"--level must be >= 1 (got {args.level})")
     scene = load_scene(args.scene)
     if not 1 <= args.poses <= 4:
         raise InputError(f"--poses must be 1..4 (got {args.poses})")
@@ -85,23 +83,24 @@ def cmd_planted_bench(args) -> int:
 
     overrides = optimize_overrides(args)
     workers, scheduler = cluster_args(args)
-    if any(lv < 1 for lv in args.levels or [args.resolution]):
-        raise InputError("--resolution and --levels must be >= 1")
+    levels = args.levels or args.level
+    if any(lv < 1 for lv in levels):
+        raise InputError(f"--level must be >= 1 (got {min(levels)})")
     kwargs = dict(overrides=overrides, extractors=args.extractors, solver=args.solver, cases=args.cases,
                   workers=workers, scheduler=scheduler, consolidation=consolidation(args),
                   tendons=tendon_settings(args), front=front_settings(args))
-    if args.levels:
+    if args.levels or len(set(levels)) > 1:
         from ..planted.levels import run_levels
         from ..planted.levels import table as levels_table
 
-        result = run_levels(args.suite, sorted(set(args.levels)), args.out,
+        result = run_levels(args.suite, sorted(set(levels)), args.out,
                             coarse_to_fine=not args.independent_levels, **kwargs)
         json_out(args, result)
         if args.json != "-":
             print("\n".join(levels_table(result)))
             print(f"outputs in {args.out}/ (levels.json, fronts.png, level<N>/)")
         return 0
-    result = run_suite(args.suite, args.resolution, args.out, **kwargs)
+    result = run_suite(args.suite, levels[0], args.out, **kwargs)
     json_out(args, result)
     if args.json != "-":
         print("\n".join(table(result)))
@@ -146,7 +145,7 @@ def cmd_sweep(args) -> int:
 def add_commands(sub) -> None:
     s = sub.add_parser("bench", help="headless resolution-scaling benchmark (JSON, CSV, PNG)")
     s.add_argument("scene", metavar="SCENE", nargs="?", default="t_shape", help="default t_shape")
-    s.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3], metavar="N")
+    add_level_flag(s, [1, 2, 3], "the levels to measure (default 1 2 3)", many=True, aliases=("--levels",))
     s.add_argument("--solver", nargs="+", choices=SOLVER_CHOICES, default=["cg", "direct"])
     s.add_argument("--repeat", type=int, default=3, metavar="N", help="runs per timing (default 3)")
     s.add_argument("--out", default="recordings/bench", metavar="DIR")
@@ -168,8 +167,7 @@ def add_commands(sub) -> None:
     s.add_argument("scene", metavar="SCENE", help="built-in scene name or scene TOML file")
     s.add_argument("--tendons", type=int, default=2, metavar="N", help="number of tendons, 1..5 (default 2)")
     s.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
-    s.add_argument("--level", type=int, default=2, metavar="N",
-                   help="resolution level of the planted equilibrium (default 2)")
+    add_level_flag(s, 2, "resolution level of the planted equilibrium (default 2)")
     s.add_argument("--poses", type=int, default=1, metavar="P",
                    help="target poses made by the same tendons, 1..4 (default 1)")
     s.add_argument("--out", default=".", metavar="DIR",
@@ -182,12 +180,14 @@ def add_commands(sub) -> None:
     s.add_argument("suite", metavar="DIR", nargs="?", default="benchmarks/planted",
                    help="folder of planted cases, NAME.toml + NAME.json (default benchmarks/planted)")
     level = s.add_mutually_exclusive_group()
-    level.add_argument("--resolution", type=int, default=2, metavar="N", help="resolution level (default 2)")
+    add_level_flag(level, [2], "resolution level (default 2); several levels run at each (into DIR/level<N>/) "
+                               "and compare: per case the front of every level and whether the recommended "
+                               "count is the same", many=True)
     level.add_argument("--levels", type=int, nargs="+", metavar="N",
-                       help="run at each of these levels (into DIR/level<N>/) and compare: per case the front "
-                            "of every level and whether the recommended count is the same")
+                       help="as --level, and the comparison's folders (DIR/level<N>/, levels.json) even for one "
+                            "level")
     s.add_argument("--independent-levels", action="store_true",
-                   help="with --levels, search each level on its own (default: each level also searches from "
+                   help="with several levels, search each level on its own (default: each level also searches from "
                         "the coarser level's designs, as design --routes-from does)")
     s.add_argument("--out", default="recordings/planted", metavar="DIR")
     s.add_argument("--cases", nargs="+", metavar="NAME", help="run only these cases")

@@ -68,6 +68,29 @@ def json_out(args, data: dict) -> None:
         write_json(data, args.json)
 
 
+#: the flag that names the resolution level in every command, and its former name, still accepted
+LEVEL_FLAG, LEVEL_ALIAS = "--level", "--resolution"
+
+
+def add_level_flag(p, default: int | list[int] | None, help: str, many: bool = False, aliases=()) -> None:
+    """``--level N`` (with ``many``, ``--level N [N ...]``) into ``args.level``: the
+    resolution level (:func:`~tendon_taichi.body.problem.level_scale`); ``--resolution``
+    and ``aliases`` are other names for it. :func:`levels_given` checks it."""
+    p.add_argument(LEVEL_FLAG, LEVEL_ALIAS, *aliases, dest="level", type=int, default=default,
+                   nargs="+" if many else None, metavar="N", help=f"{help}; {LEVEL_ALIAS} is its former name")
+
+
+def levels_given(args) -> list[int]:
+    """The levels a command was given (none where it takes no ``--level``); raises
+    InputError for one below 1."""
+    level = getattr(args, "level", None)
+    levels = [] if level is None else list(level) if isinstance(level, list) else [level]
+    for lv in levels:
+        if lv < 1:
+            raise InputError(f"{LEVEL_FLAG} must be >= 1 (got {lv})")
+    return levels
+
+
 def add_json(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", nargs="?", const="-", metavar="FILE",
                    help="machine-readable summary on stdout, or into FILE")

@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import InputError
 from ..extract.checks import PLUGIN_TIMEOUT
 from ..extract.settings import BUDGET
-from .common import PROG, SOLVER_CHOICES, add_json, json_out
+from .common import PROG, SOLVER_CHOICES, add_json, add_level_flag, json_out
 from .runs import add_optimize_flags, optimize_overrides
 from .tendons import (add_consolidation_flags, add_front_flags, add_tendon_flags, consolidation, front_settings,
                       plugin_timeout, tendon_settings)
@@ -76,10 +76,8 @@ def cmd_design(args) -> int:
     tendons = tendon_settings(args)
     cons = consolidation(args, budget=budget)
     timeout = plugin_timeout(args)
-    if args.resolution < 1:
-        raise InputError(f"--resolution must be >= 1 (got {args.resolution})")
     scene = with_overrides(load_scene(args.scene), optimize_overrides(args)).with_tendons(**tendons)
-    result = design(scene, args.resolution, args.out, args.solver, budget, max_tendons, args.extractors, cons,
+    result = design(scene, args.level, args.out, args.solver, budget, max_tendons, args.extractors, cons,
                     Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png,
                     workers=default_workers() if args.workers is None else args.workers,
                     routes_from=args.routes_from, min_capstan=args.min_capstan, **front)
@@ -98,7 +96,7 @@ def cmd_design(args) -> int:
 def add_commands(sub) -> None:
     s = sub.add_parser("design", help="the main job: optimize, extract, consolidate, route, recommend a design")
     s.add_argument("scene", metavar="SCENE", help="built-in scene name or scene TOML file")
-    s.add_argument("--resolution", type=int, default=1, metavar="N", help="resolution level (default 1)")
+    add_level_flag(s, 1, "resolution level (default 1)")
     s.add_argument("--out", metavar="DIR", help="output folder (default designs/<scene>-r<N>)")
     s.add_argument("--budget", type=float, default=BUDGET, metavar="F",
                    help=f"the as-built pose error you accept, F x L (default {BUDGET:g}): the recommended "

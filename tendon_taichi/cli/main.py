@@ -23,7 +23,7 @@ import threading
 from ..errors import InputError, Stopped, TendonError
 from ..physics import runtime
 from . import batch, design, runs, tendons
-from .common import PROG, Parser, check_before_work
+from .common import PROG, Parser, check_before_work, levels_given
 
 
 #: the exit status when stdout's reader went away (128 + SIGPIPE, as a shell reports it)
@@ -109,8 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command is None:
             parser.print_help(sys.stderr)
             return 2
-        if getattr(args, "resolution", None) is not None and args.resolution < 1:
-            raise InputError(f"--resolution must be >= 1 (got {args.resolution})")
+        levels_given(args)
         if args.max_dofs is not None:
             if args.max_dofs < 1:
                 raise InputError(f"--max-dofs must be >= 1 (got {args.max_dofs})")

@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import InputError
 from ..files import file_stem
 from ..objective.settings import SETTINGS
-from .common import PROG, SOLVER_CHOICES, add_json, json_out
+from .common import PROG, SOLVER_CHOICES, add_json, add_level_flag, json_out
 
 
 # ------------------------------------------------------------------ scenes
@@ -70,7 +70,7 @@ def cmd_simulate(args) -> int:
 
     t0 = time.perf_counter()
     scene = load_scene(args.scene)
-    problem = build_problem(scene, args.resolution)
+    problem = build_problem(scene, args.level)
     ratios = contraction_ratios(problem, args.uniform if args.contract is None
                                 else _read_ratios(args.contract))
     export = Path(args.export or Path("recordings") / f"{file_stem(scene.name)}-r{problem.level}-simulate.npz")
@@ -143,7 +143,7 @@ def cmd_optimize(args) -> int:
     if args.log_every < 0:
         raise InputError(f"--log-every must be >= 0 (got {args.log_every})")
     try:
-        result = optimize(scene, args.resolution, args.solver, record=args.record, export=args.export,
+        result = optimize(scene, args.level, args.solver, record=args.record, export=args.export,
                           log_every=args.log_every, progress=Progress(enabled=not args.quiet),
                           resume=args.resume, png=args.png)
     except Interrupted as exc:
@@ -203,7 +203,7 @@ def add_commands(sub) -> None:
 
     s = sub.add_parser("simulate", help="solve one equilibrium for given fiber contractions")
     s.add_argument("scene", metavar="SCENE", help="built-in scene name or scene TOML file")
-    s.add_argument("--resolution", type=int, default=1, metavar="N", help="resolution level (default 1)")
+    add_level_flag(s, 1, "resolution level (default 1)")
     g = s.add_mutually_exclusive_group(required=True)
     g.add_argument("--uniform", type=float, metavar="C",
                    help="contract every fiber by the ratio C of its rest length")
@@ -221,8 +221,7 @@ def add_commands(sub) -> None:
 
     s = sub.add_parser("optimize", help="regularized soft IK with the L0 homotopy, recorded to rerun")
     s.add_argument("scene", metavar="SCENE", nargs="?", help="built-in scene name or scene TOML file")
-    s.add_argument("--resolution", type=int, default=None, metavar="N",
-                   help="resolution level (default 1; when resuming, the recorded one)")
+    add_level_flag(s, None, "resolution level (default 1; when resuming, the recorded one)")
     s.add_argument("--record", metavar="RUN.rrd", help="recording (default recordings/<scene>-r<N>.rrd)")
     s.add_argument("--export", metavar="OUT.npz", help="final problem export (default: beside the recording)")
     s.add_argument("--solver", choices=SOLVER_CHOICES, default=None,
