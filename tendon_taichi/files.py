@@ -35,6 +35,13 @@ def check_writable(path: str | Path, what: str = "output", make: bool = True) ->
     (its folder cannot be made or written, or it is a folder; a stream, when it is
     not writable); leaves nothing behind but the folders it made - none, without
     ``make``: then the nearest folder that exists is tried instead."""
+    try:
+        _check_writable(path, what, make)
+    except OSError as exc:  # a folder on the way that cannot be entered: even stat fails
+        raise InputError(f"cannot write the {what} '{path}': {exc.strerror or exc}") from None
+
+
+def _check_writable(path: str | Path, what: str, make: bool) -> None:
     path = destination(path)
     if path.is_dir():
         raise InputError(f"the {what} '{path}' is a folder")
@@ -50,7 +57,10 @@ def check_folder(path: str | Path, what: str = "output folder") -> None:
     folder ``path`` (it is a file, or neither it nor the folder that would hold it
     can be written); makes nothing."""
     path = Path(path)
-    _check_folder_below(path, path, what, make=False)
+    try:
+        _check_folder_below(path, path, what, make=False)
+    except OSError as exc:
+        raise InputError(f"cannot write the {what} '{path}': {exc.strerror or exc}") from None
 
 
 def _check_folder_below(folder: Path, path: Path, what: str, make: bool) -> None:

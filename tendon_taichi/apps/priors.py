@@ -58,9 +58,13 @@ def read_prior(path: str | Path, scene: Scene) -> PriorDesign:
     checked to be one of ``scene``'s body with as many poses; one clear line
     (:class:`InputError`) when it is not."""
     p = Path(path)
-    p = p / "design.json" if p.is_dir() else p
+    try:  # a folder on the way that cannot be entered makes even is_dir fail
+        p = p / "design.json" if p.is_dir() else p
+        found = p.is_file()
+    except OSError as exc:
+        raise InputError(f"--routes-from: cannot read '{path}': {exc.strerror or exc}") from None
     where = f"--routes-from: '{p}'"
-    if not p.is_file():
+    if not found:
         raise InputError(f"--routes-from: no design at '{path}' (a design folder or its design.json)")
     try:
         data = json.loads(p.read_text())

@@ -4,7 +4,8 @@ one place where errors become exit statuses.
 Results go to stdout (``--json`` for machines, to stdout or a file), progress
 and warnings to stderr. Bad input gives one ``tendon-taichi: error: ...`` line
 and exit status 2; an unexpected failure one ``internal error`` line and 1
-(``--debug`` shows the traceback); Ctrl-C exits 130, and SIGTERM (``timeout``,
+(``--debug`` shows the traceback); a file or folder the user may not read or write
+one ``error`` line and 2 wherever it is met; Ctrl-C exits 130, and SIGTERM (``timeout``,
 a batch scheduler) stops the command the same way, keeping what Ctrl-C keeps,
 with 143; a reader of stdout that
 stops early (``tendon-taichi scenes --json | head``) ends the command quietly
@@ -76,6 +77,13 @@ def _stdout_to_devnull() -> None:
     os.close(devnull)
 
 
+def _denied(exc: PermissionError) -> str:
+    """The one line for a file or folder this user may not use."""
+    if exc.filename is None:
+        return f"permission denied ({exc})"
+    return f"permission denied: '{exc.filename}'"
+
+
 def _internal_error(exc: Exception, debug: bool) -> int:
     if debug:
         raise exc
@@ -132,6 +140,9 @@ def main(argv: list[str] | None = None) -> int:
             return _internal_error(exc, debug)
         _stdout_to_devnull()
         return BROKEN_PIPE
+    except PermissionError as exc:  # a file or folder the user may not read or write: not a bug
+        print(f"{PROG}: error: {_denied(exc)}", file=sys.stderr)
+        return 2
     except SystemExit as exc:  # --help
         return int(exc.code or 0)
     except Exception as exc:  # noqa: BLE001 - the one place that turns bugs into one line

@@ -345,11 +345,11 @@ def read_recording(path: str | Path) -> RecordedRun:
     """Read a recording (see the module docstring); raise RecordingError if it is
     missing, not an .rrd, not a tendon-taichi run, or has no readable header."""
     path = Path(path)
-    if path.is_dir():
-        raise RecordingError(f"recording '{path}' is a folder, not a file")
-    if not path.is_file():
-        raise RecordingError(f"recording '{path}' does not exist")
-    try:
+    try:  # a folder on the way that cannot be entered makes even is_dir fail
+        if path.is_dir():
+            raise RecordingError(f"recording '{path}' is a folder, not a file")
+        if not path.is_file():
+            raise RecordingError(f"recording '{path}' does not exist")
         with open(path, "rb") as fh:
             if fh.read(4) != b"RRF2":
                 raise RecordingError(f"'{path}' is not a rerun recording (.rrd)")

@@ -25,6 +25,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -78,6 +79,8 @@ def load_suite(directory: str | Path) -> list[Case]:
     d = Path(directory)
     if not d.is_dir():
         raise InputError(f"planted suite '{d}' is not a folder")
+    if not os.access(d, os.R_OK | os.X_OK):
+        raise InputError(f"cannot read the planted suite '{d}': permission denied")
     cases = []
     for toml in sorted(d.glob("*.toml")):
         js = toml.with_suffix(".json")
