@@ -21,6 +21,7 @@ import numpy as np
 from ..body.cables import CableSet
 from ..body.mesh import Mesh
 from ..body.scene import Material
+from ..probes import probe
 from . import forces, runtime
 from .buffers import k_copy_nodes, k_read, k_read_int, k_read_ranges, k_write, k_write_int, k_write_ranges
 from .capstan import Capstan, FrictionJacobian, PointMap
@@ -332,6 +333,7 @@ class Model:
         self.gradient_norm2()
         return self.last_gradient.reshape(self.n, 2).copy()
 
+    @probe("prepare")
     def prepare_hessian(self, project: bool = False, jacobi: bool = True) -> None:
         """Element tangents (exact or PSD-projected), cable stiffnesses and (``jacobi``)
         the block-Jacobi preconditioner at the current x."""
@@ -433,6 +435,7 @@ class Model:
         forces.k_hessian_entries(self.fb, self.ib, out, self.serial)
         return out
 
+    @probe("assembly")
     def hessian_sums(self, scatter: np.ndarray, bins: int) -> np.ndarray:
         """The :meth:`hessian_entries` summed into ``bins`` bins, entry k into bin
         ``scatter[k]`` (int32, (36 m + 144 S,), each < ``bins``): what

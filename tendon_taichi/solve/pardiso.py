@@ -79,6 +79,7 @@ from ctypes.util import find_library
 import numpy as np
 
 from ..physics import runtime
+from ..probes import probe
 from ._csc import triangle
 
 _lib: dict = {}
@@ -124,6 +125,7 @@ def _load():
     return fn
 
 
+@probe("pardiso")
 def available() -> bool:
     """Whether MKL PARDISO loaded (the ``mkl`` extra is installed)."""
     return _load() is not None
@@ -288,6 +290,7 @@ class PardisoLDL:
         """The threads PARDISO ran its last phase on, as it reports them."""
         return int(self._iparm[2])
 
+    @probe("factor")
     def factor(self, data: np.ndarray) -> bool:
         """Factorize the matrix of entries ``data`` (in the pattern's order); whether
         it is positive definite (PARDISO's Cholesky met no pivot <= 0: its error -4)
@@ -303,6 +306,7 @@ class PardisoLDL:
         self.generation += 1
         return err == 0 and not (self.indefinite and self._iparm[13] > 0)
 
+    @probe("solves")
     def solve(self, b: np.ndarray) -> np.ndarray:
         """A^-1 b with the current factorization, b (n,), or (n, r): r columns in one
         call, or in the reproducible mode one call per column - there PARDISO's
