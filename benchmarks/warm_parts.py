@@ -6,7 +6,8 @@ Per level, the warm equilibrium ``tendon-taichi bench`` times as "eq warm" on th
 direct backend (plain exact Newton to the relative force tolerance 1e-10, from
 the equilibrium of a design whose contraction ratios differ by +-0.5 %), N times
 (default 5), each part's time summed over each solve; the run of the median
-total is printed, in ms:
+total is printed, in ms, each part timed by the package's probe of its name
+(``tendon_taichi/probes.py``):
 
 * ``factor``: the sparse Cholesky's numerical factorizations (PARDISO's, or
   qdldl's without MKL), with their count, and ``entries``, the factor's
@@ -30,7 +31,6 @@ docs/method.md ("Where a warm equilibrium's time goes") quotes it for t_shape.
 import argparse
 import sys
 import time
-from contextlib import contextmanager
 
 import numpy as np
 
@@ -38,40 +38,11 @@ from tendon_taichi.apps.bench import design_pair
 from tendon_taichi.body.problem import build_problem
 from tendon_taichi.body.scene import load_scene
 from tendon_taichi.optimizer.soft_ik import SoftIK
-from tendon_taichi.physics.model import Model
-from tendon_taichi.solve.cholesky import cholesky_class
-from tendon_taichi.solve.direct import DirectSolver
+from tendon_taichi.probes import timers
 from tendon_taichi.solve.newton import NewtonSolver
 
+#: the parts, each the probe (tendon_taichi/probes.py) of its name
 PARTS = ("factor", "solves", "assembly", "prepare", "check")
-
-
-@contextmanager
-def timed_parts(clock: dict):
-    """Time the parts (module docstring) into ``clock`` (part: [seconds, calls])
-    while inside; the methods are restored after."""
-    chol = cholesky_class()
-    targets = {"factor": (chol, "factor"), "solves": (chol, "solve"), "assembly": (Model, "hessian_sums"),
-               "prepare": (Model, "prepare_hessian"), "check": (DirectSolver, "_ordered_product")}
-    saved = {part: getattr(owner, name) for part, (owner, name) in targets.items()}
-
-    def wrap(part, method):
-        def timed(*args, **kwargs):
-            t = time.perf_counter()
-            try:
-                return method(*args, **kwargs)
-            finally:
-                clock[part][0] += time.perf_counter() - t
-                clock[part][1] += 1
-        return timed
-
-    for part, (owner, name) in targets.items():
-        setattr(owner, name, wrap(part, saved[part]))
-    try:
-        yield clock
-    finally:
-        for part, (owner, name) in targets.items():
-            setattr(owner, name, saved[part])
 
 
 def measure(scene, level: int, repeat: int) -> dict:
@@ -88,13 +59,12 @@ def measure(scene, level: int, repeat: int) -> dict:
     for _ in range(repeat):
         lin.reset()
         first = newton.solve(ac=r0 * a0, x0=nodes)
-        clock = {part: [0.0, 0] for part in PARTS}
-        with timed_parts(clock):
+        with timers(*PARTS) as clock:
             t = time.perf_counter()
             warm = newton.solve(ac=r1 * a0)
             total = time.perf_counter() - t
-        runs.append({"total": total, **{p: clock[p][0] for p in PARTS},
-                     "rest": total - sum(clock[p][0] for p in PARTS), "factorizations": clock["factor"][1]})
+        runs.append({"total": total, **{p: clock[p].seconds for p in PARTS},
+                     "rest": total - sum(clock[p].seconds for p in PARTS), "factorizations": clock["factor"].calls})
         m.set_positions(first.x)
     out = sorted(runs, key=lambda r: r["total"])[(len(runs) - 1) // 2]  # the median run's parts, which add up
     return {"level": level, "dofs": 2 * int(np.sum(~m.fixed)), "steps": warm.newton_iterations,
