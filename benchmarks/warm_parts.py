@@ -1,6 +1,6 @@
 """Where the time of ``bench``'s warm equilibrium goes, level by level.
 
-Usage: python benchmarks/warm_parts.py [SCENE] [--levels 2 3 4 5 6] [--repeat N]
+Usage: python benchmarks/warm_parts.py [SCENE] [--levels 2 3 4 5 6] [--repeat N] [--qdldl]
 
 Per level, the warm equilibrium ``tendon-taichi bench`` times as "eq warm" on the
 direct backend (plain exact Newton to the relative force tolerance 1e-10, from
@@ -24,13 +24,16 @@ Then each column's exponent against the DOFs, fitted as ``bench`` fits them
 (from the second level on), that of one factorization (``per factorization``),
 and ``linear rest``: the exponent the whole would have if every part but the
 factorizations and their solves cost the same per DOF as at the first fitted
-level - the growth the factorization alone sets.
+level - the growth the factorization alone sets. ``--qdldl`` factorizes with
+qdldl where MKL PARDISO loads too (the direct backend told, through the probe
+``pardiso``, that it did not).
 docs/method.md ("Where a warm equilibrium's time goes") quotes it for t_shape.
 """
 
 import argparse
 import sys
 import time
+from contextlib import nullcontext
 
 import numpy as np
 
@@ -38,7 +41,7 @@ from tendon_taichi.apps.bench import design_pair
 from tendon_taichi.body.problem import build_problem
 from tendon_taichi.body.scene import load_scene
 from tendon_taichi.optimizer.soft_ik import SoftIK
-from tendon_taichi.probes import timers
+from tendon_taichi.probes import around, timers
 from tendon_taichi.solve.newton import NewtonSolver
 
 #: the parts, each the probe (tendon_taichi/probes.py) of its name
@@ -81,6 +84,7 @@ def main(argv=None) -> int:
     ap.add_argument("scene", nargs="?", default="t_shape")
     ap.add_argument("--levels", type=int, nargs="+", default=[2, 3, 4, 5, 6])
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--qdldl", action="store_true", help="factorize with qdldl where PARDISO loads too")
     args = ap.parse_args(argv)
     scene = load_scene(args.scene)
     cols = ("total",) + PARTS + ("rest",)
@@ -88,7 +92,8 @@ def main(argv=None) -> int:
           + " ".join(f"{c:>8}" for c in cols) + "   (ms)")
     rows = []
     for level in args.levels:
-        r = measure(scene, level, args.repeat)
+        with around("pardiso", lambda call: False) if args.qdldl else nullcontext():
+            r = measure(scene, level, args.repeat)
         rows.append(r)
         print(f"{level:>5} {r['dofs']:>6} {r['steps']:>5} {r['factorizations']:>7.0f} {r['entries']:>9} "
               + " ".join(f"{1e3 * r[c]:>8.2f}" for c in cols), flush=True)
