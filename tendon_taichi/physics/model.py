@@ -156,8 +156,7 @@ class Model:
         #: else None: the copy kernels move the arrays)
         self._fb_host, self._ib_host = runtime.host_view(self.fb), runtime.host_view(self.ib)
         # filled through the host's view where there is one: a copy, where from_numpy launches a
-        # kernel (with :func:`_body_arrays`, a level-3 tendon robot is made in 1.0 ms instead of 3.4,
-        # the same bytes; a level-3 design makes about 600)
+        # kernel (with :func:`_body_arrays`; the same bytes, and a level-3 design makes about 600)
         if self._fb_host is not None and self._ib_host is not None:
             self._fb_host[:] = host.fb
             self._ib_host[:] = host.ib

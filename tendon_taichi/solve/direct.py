@@ -19,8 +19,8 @@ that of the elements and the segments alone, and its ordering - the
 elements' - is computed once per mesh and shared by every tendon layout.
 
 When a route moves (route optimization), a few of its points cross into other
-triangles; a new pattern would need a new analysis of the factorization (at
-level 3 about 2.5 ms against 1 ms for the numbers). Where the current pattern
+triangles; a new pattern would need a new analysis of the factorization,
+which costs more than its numbers. Where the current pattern
 lacks the entries of at most :data:`DETACHED_MAX` segments it is kept, and
 those segments are *detached* (:meth:`DirectSolver._reattach`): each one's
 rank-one block is split into a part within its points' triangles, which every
