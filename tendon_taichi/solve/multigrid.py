@@ -124,8 +124,8 @@ class GeometricMultigridPreconditioner(ReusedPreconditioner):
     ``refresh_iterations``: a solve that takes more iterations than this marks
     the hierarchy stale. A fresh one preconditions the solves of t_shape's Newton
     steps to 4-40 iterations at levels 4 and 6, and rebuilding it costs about ten
-    of them: of 20, 30, 45 and 80 (the algebraic one's), 30 gave the fastest cold
-    and warm equilibria at level 6."""
+    of them: of 20, 30, 45 and 80 (the algebraic one's), 30 gave the fastest warm
+    equilibria at level 6, and cold ones about as fast as 20."""
 
     def __init__(self, model: Model, refresh_iterations: int = 30):
         super().__init__(model, refresh_iterations, ordered=False)

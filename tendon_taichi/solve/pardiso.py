@@ -44,8 +44,9 @@ Threads. From :data:`PARALLEL_MIN` DOFs a factorization runs on the process's
 threads (:func:`~tendon_taichi.physics.runtime.factor_threads`: its cores where it
 has them to itself - ``optimize``, ``simulate``, ``bench`` -, one in ``design``,
 whose worker processes hold the other cores, and in every worker): at level 5
-about 1.7x faster on two (benchmarks/pardiso_modes.py). Its numbers do not depend on the threads: there
-PARDISO runs in its conditional numerical reproducibility mode (:data:`CNR`), in
+about 1.7x faster on two (benchmarks/pardiso_modes.py). Its numbers do not
+depend on the threads: there PARDISO runs in its conditional numerical
+reproducibility mode (:data:`CNR`), in
 which the factors of t_shape's lattices at levels 4, 5 and 6 and of its tendon
 patterns in PARDISO's own order solve to the same bits on one, two and three
 threads, and whatever the mode's number - one right-hand side at a time: several
