@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from tendon_taichi.apps.bench import _designs
+from tendon_taichi.apps.bench import design_pair
 from tendon_taichi.body.problem import build_problem
 from tendon_taichi.body.scene import load_scene
 from tendon_taichi.optimizer.soft_ik import SoftIK
@@ -55,7 +55,7 @@ def measure(scene, level: int, repeat: int) -> dict:
     problem = build_problem(scene, level)
     ik = SoftIK(problem, scene.optimize, "direct")
     ik.configure(None)
-    first, _ = _designs(problem)
+    first, _ = design_pair(problem)
     model, linear = ik.model, ik.linear
     NewtonSolver(model, linear).solve(ac=first * problem.fibers.a0, x0=problem.mesh.nodes)
     H = linear.assemble_ordered()

@@ -26,6 +26,7 @@ import numpy as np
 
 from tendon_taichi.cli import main
 from tendon_taichi.extract import front
+from tendon_taichi.probes import around
 
 from _scene_args import scene_args
 
@@ -36,9 +37,10 @@ CONTINUED: list[float] = []
 EVALS = {"screen": 0, "full": 0, "continued": 0}
 
 
-def _screened(search, layout, routes):
+def _screened(screen, search, layout, routes):
+    """The front's screen (the probe ``screened``), and each extension finished in full beside."""
     before = search.out.route_evaluations
-    lay = SCREEN(search, layout, routes)
+    lay = screen(search, layout, routes)
     EVALS["screen"] += search.out.route_evaluations - before
     if lay is None:
         return None
@@ -51,9 +53,10 @@ def _screened(search, layout, routes):
     return lay
 
 
-def _continued(search, layout, rounds):
+def _continued(finish, search, layout, rounds):
+    """The front's finish of the screened best (the probe ``continued``), its evaluations counted."""
     before = search.out.route_evaluations
-    done = CONTINUE(search, layout, rounds)
+    done = finish(search, layout, rounds)
     EVALS["continued"] += search.out.route_evaluations - before
     CONTINUED.append(done.cost)
     return done
@@ -79,17 +82,11 @@ def report() -> None:
 
 def run(argv: list[str]) -> int:
     scene, level, flags, _ = scene_args(argv)
-    front._screened, front._continued = _screened, _continued
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            rc = main(["design", scene, "--resolution", level, "--workers", "0", "--out", tmp, *flags])
-    finally:
-        front._screened, front._continued = SCREEN, CONTINUE
+    with around("screened", _screened), around("continued", _continued), tempfile.TemporaryDirectory() as tmp:
+        rc = main(["design", scene, "--resolution", level, "--workers", "0", "--out", tmp, *flags])
     report()
     return rc
 
-
-SCREEN, CONTINUE = front._screened, front._continued
 
 if __name__ == "__main__":
     if len(sys.argv) < 2:

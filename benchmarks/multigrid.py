@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from tendon_taichi.apps.bench import _designs
+from tendon_taichi.apps.bench import design_pair
 from tendon_taichi.body.problem import build_problem
 from tendon_taichi.body.scene import load_scene
 from tendon_taichi.physics.model import Model
@@ -54,7 +54,7 @@ def cycle_row(newton: NewtonSolver, b: np.ndarray, tols: list[float], repeat: in
 
 def measure(scene, level: int, tols: list[float], sweeps: list[str], repeat: int) -> dict:
     problem = build_problem(scene, level)
-    first, _ = _designs(problem)
+    first, _ = design_pair(problem)
     b = np.random.default_rng(0).standard_normal((problem.mesh.n_nodes, 2))
     out = {"level": level, "dofs": problem.counts()["dofs"], "rows": {}}
     for name in [f"cg-gmg {s}" for s in sweeps] + ["cg-amg", "direct"]:

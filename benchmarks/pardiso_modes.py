@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from tendon_taichi.apps.bench import _designs
+from tendon_taichi.apps.bench import design_pair
 from tendon_taichi.body.problem import build_problem
 from tendon_taichi.body.scene import load_scene
 from tendon_taichi.physics.model import Model
@@ -33,7 +33,7 @@ def lattice_hessian(scene, level: int):
     """The lattice's ordered Hessian (CSC, free DOFs) at the first bench design's equilibrium."""
     problem = build_problem(scene, level)
     model = Model.from_problem(problem)
-    first, _ = _designs(problem)
+    first, _ = design_pair(problem)
     newton = NewtonSolver(model, "direct")
     newton.solve(ac=first * problem.fibers.a0, x0=problem.mesh.nodes)
     return newton.linear.assemble_ordered().Hp  # the solver's own pattern, not a second one

@@ -26,15 +26,15 @@ from tendon_taichi.extract import realizable
 from tendon_taichi.optimizer.gauss_newton import gauss_newton
 from tendon_taichi.optimizer.homotopy import RunCallbacks, run_stage
 from tendon_taichi.optimizer.soft_ik import SoftIK
+from tendon_taichi.probes import around
 
 #: differences in pose error (fraction of L) below this are ties
 TIE = 1e-7
 ROWS: list[dict] = []
-_SOLVE = realizable.solve_realizable
 
 
-def _both(problem, tendons, state, settings, solver="auto", tensions=None, start=None, positions=None):
-    """``solve_realizable``, with the solve done by both solvers on the side."""
+def _both(call, problem, tendons, state, settings, solver="auto", tensions=None, start=None, positions=None):
+    """``solve_realizable`` (``call``, its probe), with the solve done by both solvers on the side."""
     if tendons:
         r0 = realizable.warm_ratios(problem, tendons, state, tensions) if start is None else np.asarray(start, float)
         warm = None if positions is None else [positions]
@@ -48,7 +48,7 @@ def _both(problem, tendons, state, settings, solver="auto", tensions=None, start
             except ConvergenceError:
                 row[name] = (np.inf, 0, time.perf_counter() - t0)
         ROWS.append(row)
-    return _SOLVE(problem, tendons, state, settings, solver, tensions, start, positions)
+    return call(problem, tendons, state, settings, solver, tensions, start, positions)
 
 
 def report() -> None:
@@ -66,8 +66,7 @@ if __name__ == "__main__":
         sys.exit(__doc__.split("\n\n")[1])
     scene, rest = sys.argv[1], sys.argv[2:]
     level = rest.pop(0) if rest and rest[0].isdigit() else "1"
-    realizable.solve_realizable = _both
-    with tempfile.TemporaryDirectory() as out:
+    with around("solve_realizable", _both), tempfile.TemporaryDirectory() as out:
         code = main(["design", scene, "--resolution", level, "--out", out, "--quiet", "--workers", "0", "--no-png",
                      *rest])
     if code:

@@ -19,12 +19,12 @@ for t_shape at level 2.
 
 import sys
 import time
+from contextlib import ExitStack
 
 import numpy as np
 
 from tendon_taichi.extract import routing
-from tendon_taichi.extract.routing import RouteObjective
-from tendon_taichi.optimizer.soft_ik import PoseSolve
+from tendon_taichi.probes import around
 
 from _scene_args import scene_args
 from route_replay import alternating, record
@@ -36,21 +36,20 @@ def replay(calls: list[tuple], every_point: bool) -> tuple[float, int, int, list
     """Every call again, with ``every_point`` each point's adjoint solved as it is
     valued: the time (s), the points valued, the adjoint solves and each call's objective."""
     adjoints = [0]
-    value, adjoint = RouteObjective.value, PoseSolve.adjoint
 
-    def counted(self, rhs):
+    def counted(call, self, rhs):
         adjoints[0] += 1
-        return adjoint(self, rhs)
+        return call(self, rhs)
 
-    def valued_with_gradient(self, z):
-        f = value(self, z)
+    def valued_with_gradient(call, self, z):
+        f = call(self, z)
         self.gradient(z)
         return f
 
-    PoseSolve.adjoint = counted
-    if every_point:
-        RouteObjective.value = valued_with_gradient
-    try:
+    with ExitStack() as stack:
+        stack.enter_context(around("PoseSolve.adjoint", counted))
+        if every_point:
+            stack.enter_context(around("RouteObjective.value", valued_with_gradient))
         seconds, points, objectives = 0.0, 0, []
         for args, kwargs in calls:
             t0 = time.perf_counter()
@@ -58,8 +57,6 @@ def replay(calls: list[tuple], every_point: bool) -> tuple[float, int, int, list
             seconds += time.perf_counter() - t0
             points += out.evaluations
             objectives.append(out.objective)
-    finally:
-        RouteObjective.value, PoseSolve.adjoint = value, adjoint
     return seconds, points, adjoints[0], objectives
 
 

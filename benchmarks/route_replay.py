@@ -33,19 +33,18 @@ quotes its figures for t_shape at level 3.
 import sys
 import tempfile
 import time
+from contextlib import ExitStack
 
 import numpy as np
 import scipy.optimize as so
 
 from tendon_taichi.cli import main
-from tendon_taichi.extract import consolidation, routing
+from tendon_taichi.extract import routing
 from tendon_taichi.physics import runtime
+from tendon_taichi.probes import around
 from tendon_taichi.solve import direct, pardiso
 
 from _scene_args import scene_args
-
-#: the modules that call optimize_routes by their own name for it
-CALLERS = (routing, consolidation)
 
 
 def _copy(value):
@@ -61,21 +60,13 @@ def record(argv: list[str]) -> list[tuple]:
     """Run ``design`` with ``argv`` (no workers); return every route optimization's
     arguments."""
     calls = []
-    original = routing.optimize_routes
 
-    def logged(*args, **kwargs):
+    def logged(call, *args, **kwargs):
         kept = {k: _copy(v) for k, v in kwargs.items() if k != "on_iteration"}
         calls.append((tuple(_copy(a) for a in args), kept))
-        return original(*args, **kwargs)
-    patched = [m for m in CALLERS if getattr(m, "optimize_routes", None) is original]
-    for m in patched:
-        m.optimize_routes = logged
-    try:
-        with tempfile.TemporaryDirectory() as d:
-            rc = main(["design", *argv, "--quiet", "--workers", "0", "--no-png", "--out", d])
-    finally:
-        for m in patched:
-            m.optimize_routes = original
+        return call(*args, **kwargs)
+    with around("optimize_routes", logged), tempfile.TemporaryDirectory() as d:
+        rc = main(["design", *argv, "--quiet", "--workers", "0", "--no-png", "--out", d])
     if rc:
         sys.exit(rc)
     return calls
@@ -84,18 +75,14 @@ def record(argv: list[str]) -> list[tuple]:
 def replay(calls: list[tuple], detached_max: int) -> tuple[float, int, float]:
     """Every call again with ``detached_max``: the time (s), the evaluations and the
     summed objective."""
-    before = direct.DirectSolver.detached_max
-    direct.DirectSolver.detached_max = detached_max
-    try:
-        seconds, evaluations, total = 0.0, 0, 0.0
+    seconds, evaluations, total = 0.0, 0, 0.0
+    with direct.detached_at_most(detached_max):
         for args, kwargs in calls:
             t0 = time.perf_counter()
             out = routing.optimize_routes(*args, **kwargs)
             seconds += time.perf_counter() - t0
             evaluations += out.evaluations
             total += out.objective
-    finally:
-        direct.DirectSolver.detached_max = before
     return seconds, evaluations, total
 
 
@@ -105,7 +92,7 @@ def same_points(calls: list[tuple], reference: int, other: int) -> tuple[float, 
     them, in its order (so from the same warm starts): the largest relative
     difference of the objectives, that of the gradients (by norm, relative to the
     call's first gradient), and how many evaluations were compared."""
-    real, before = so.minimize, direct.DirectSolver.detached_max
+    real = so.minimize  # scipy's, which optimize_routes calls as so.minimize
     asked: list[tuple] = []  # per call: (kind, point, what it gave) in order
 
     def recording(fun, z0, jac=None, **kwargs):
@@ -133,16 +120,18 @@ def same_points(calls: list[tuple], reference: int, other: int) -> tuple[float, 
     recorded, worst = [], [0.0, 0.0, 0]
     try:
         with runtime.cores_shared():
-            so.minimize, direct.DirectSolver.detached_max = recording, reference
-            for args, kwargs in calls:
-                asked.clear()
-                routing.optimize_routes(*args, **kwargs)
-                recorded.append(list(asked))
-            so.minimize, direct.DirectSolver.detached_max = playing, other
-            for args, kwargs in calls:
-                routing.optimize_routes(*args, **kwargs)
+            so.minimize = recording
+            with direct.detached_at_most(reference):
+                for args, kwargs in calls:
+                    asked.clear()
+                    routing.optimize_routes(*args, **kwargs)
+                    recorded.append(list(asked))
+            so.minimize = playing
+            with direct.detached_at_most(other):
+                for args, kwargs in calls:
+                    routing.optimize_routes(*args, **kwargs)
     finally:
-        so.minimize, direct.DirectSolver.detached_max = real, before
+        so.minimize = real
     return worst[0], worst[1], worst[2]
 
 
@@ -150,22 +139,20 @@ def indefinite_replay(calls: list[tuple], way: str) -> tuple[float, int]:
     """Every call again, the Hessians that are not positive definite factorized
     ``way`` ("PARDISO": its indefinite LDL^T, "SuperLU"): the median time of such a
     factorization (s; the failed Cholesky included) and how many there were."""
-    made, init, pick = [], direct.Factorization.__init__, direct._indefinite
+    made = []
 
-    def timed(self, *args, **kwargs):
+    def timed(call, self, *args, **kwargs):
         t0 = time.perf_counter()
-        init(self, *args, **kwargs)
+        call(self, *args, **kwargs)
         if self.ldl is None or self.ldl.indefinite:  # SuperLU's or the indefinite LDL^T: not the Cholesky
             made.append(time.perf_counter() - t0)
 
-    direct.Factorization.__init__ = timed
-    if way == "SuperLU":
-        direct._indefinite = lambda pattern: None
-    try:
+    with ExitStack() as stack:
+        stack.enter_context(around("factorization", timed))
+        if way == "SuperLU":  # no indefinite LDL^T: SuperLU factorizes
+            stack.enter_context(around("indefinite", lambda call, pattern: None))
         for args, kwargs in calls:
             routing.optimize_routes(*args, **kwargs)
-    finally:
-        direct.Factorization.__init__, direct._indefinite = init, pick
     return (float(np.median(made)) if made else 0.0), len(made)
 
 

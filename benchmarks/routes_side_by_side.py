@@ -25,8 +25,8 @@ import scipy.optimize as so
 
 from tendon_taichi.cli import main
 from tendon_taichi.errors import ConvergenceError
-from tendon_taichi.extract import consolidation
-from tendon_taichi.extract.routing import RouteObjective, optimize_routes
+from tendon_taichi.extract.routing import RouteObjective
+from tendon_taichi.probes import around
 
 from _scene_args import scene_args
 
@@ -61,8 +61,8 @@ def penalty_lbfgsb(problem, routes, ratios, settings, rs, solver="auto", positio
     return best["f"], obj.evaluations, int(res.nit)
 
 
-def _both(problem, routes, ratios, settings, rs, solver="auto", positions=None, on_iteration=None):
-    """``optimize_routes``, with L-BFGS-B and the penalty run on the side."""
+def _both(call, problem, routes, ratios, settings, rs, solver="auto", positions=None, on_iteration=None):
+    """``optimize_routes`` (``call``, its probe), with L-BFGS-B and the penalty run on the side."""
     t0 = time.perf_counter()
     f_old, ev_old, it_old = penalty_lbfgsb(problem, routes, ratios, settings, rs, solver, positions)
     t1 = time.perf_counter()
@@ -73,7 +73,7 @@ def _both(problem, routes, ratios, settings, rs, solver="auto", positions=None, 
         if on_iteration is not None:
             on_iteration(k, objective)
 
-    res = optimize_routes(problem, routes, ratios, settings, rs, solver, positions, count)
+    res = call(problem, routes, ratios, settings, rs, solver, positions, count)
     ROWS.append({"old": (f_old, ev_old, t1 - t0, it_old),
                  "new": (res.objective, res.evaluations, time.perf_counter() - t1, it["k"])})
     return res
@@ -93,12 +93,8 @@ def report() -> None:
 
 def run(argv: list[str]) -> int:
     scene, level, flags, _ = scene_args(argv)
-    consolidation.optimize_routes = _both
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            rc = main(["design", scene, "--resolution", level, "--workers", "0", "--out", tmp, *flags])
-    finally:
-        consolidation.optimize_routes = optimize_routes
+    with around("optimize_routes", _both), tempfile.TemporaryDirectory() as tmp:
+        rc = main(["design", scene, "--resolution", level, "--workers", "0", "--out", tmp, *flags])
     report()
     return rc
 

@@ -19,11 +19,13 @@ docs/method.md ("Newton") quotes its figures for t_shape at level 5.
 import sys
 import tempfile
 import time
+from contextlib import ExitStack
 
 import numpy as np
 
 from tendon_taichi.cli import main
 from tendon_taichi.optimizer import soft_ik
+from tendon_taichi.probes import around
 
 from _scene_args import scene_args
 
@@ -34,28 +36,22 @@ def record(argv: list[str]) -> tuple[tuple, list]:
     """Run ``optimize`` with ``argv``; return the soft IK's (problem, settings, solver)
     and its calls [(name, args)]."""
     made, calls = [], []
-    init = soft_ik.SoftIK.__init__
 
-    def logged_init(self, problem, settings, solver="auto", cables=None):
+    def logged_init(call, self, problem, settings, solver="auto", cables=None):
         made.append((problem, settings, solver))
-        init(self, problem, settings, solver, cables)
-    originals = {name: getattr(soft_ik.SoftIK, name) for name in CALLS}
+        call(self, problem, settings, solver, cables)
 
     def logging(name):
-        def call(self, *args):
+        def logged(call, self, *args):
             calls.append((name, [np.array(a) if isinstance(a, np.ndarray) else a for a in args]))
-            return originals[name](self, *args)
-        return call
-    soft_ik.SoftIK.__init__ = logged_init
-    for name in CALLS:
-        setattr(soft_ik.SoftIK, name, logging(name))
-    try:
+            return call(self, *args)
+        return logged
+    with ExitStack() as stack:
+        stack.enter_context(around("SoftIK.__init__", logged_init))
+        for name in CALLS:
+            stack.enter_context(around(f"SoftIK.{name}", logging(name)))
         with tempfile.TemporaryDirectory() as d:
             rc = main(["optimize", *argv, "--quiet", "--record", f"{d}/run.rrd"])
-    finally:
-        soft_ik.SoftIK.__init__ = init
-        for name, f in originals.items():
-            setattr(soft_ik.SoftIK, name, f)
     if rc:
         sys.exit(rc)
     return made[0], calls

@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-from tendon_taichi.apps.bench import _designs
+from tendon_taichi.apps.bench import design_pair
 from tendon_taichi.body.problem import build_problem
 from tendon_taichi.body.scene import load_scene
 from tendon_taichi.optimizer.soft_ik import EVAL_TOL, SoftIK
@@ -59,7 +59,7 @@ def measure(scene, level: int, repeat: int) -> dict:
     """The warm equilibria of one level (module docstring)."""
     problem = build_problem(scene, level)
     a0, nodes, eps = problem.fibers.a0, problem.mesh.nodes, scene.fibers.eps
-    r0, r1 = _designs(problem)
+    r0, r1 = design_pair(problem)
     ik = SoftIK(problem, scene.optimize, "direct")
     ik.configure(None)
     m, lin = ik.model, ik.linear

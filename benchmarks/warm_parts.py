@@ -1,12 +1,13 @@
 """Where the time of ``bench``'s warm equilibrium goes, level by level.
 
-Usage: python benchmarks/warm_parts.py [SCENE] [--levels 2 3 4 5 6] [--repeat N]
+Usage: python benchmarks/warm_parts.py [SCENE] [--levels 2 3 4 5 6] [--repeat N] [--qdldl]
 
 Per level, the warm equilibrium ``tendon-taichi bench`` times as "eq warm" on the
 direct backend (plain exact Newton to the relative force tolerance 1e-10, from
 the equilibrium of a design whose contraction ratios differ by +-0.5 %), N times
 (default 5), each part's time summed over each solve; the run of the median
-total is printed, in ms:
+total is printed, in ms, each part timed by the package's probe of its name
+(``tendon_taichi/probes.py``):
 
 * ``factor``: the sparse Cholesky's numerical factorizations (PARDISO's, or
   qdldl's without MKL), with their count, and ``entries``, the factor's
@@ -23,62 +24,35 @@ Then each column's exponent against the DOFs, fitted as ``bench`` fits them
 (from the second level on), that of one factorization (``per factorization``),
 and ``linear rest``: the exponent the whole would have if every part but the
 factorizations and their solves cost the same per DOF as at the first fitted
-level - the growth the factorization alone sets.
+level - the growth the factorization alone sets. ``--qdldl`` factorizes with
+qdldl where MKL PARDISO loads too (the direct backend told, through the probe
+``pardiso``, that it did not).
 docs/method.md ("Where a warm equilibrium's time goes") quotes it for t_shape.
 """
 
 import argparse
 import sys
 import time
-from contextlib import contextmanager
+from contextlib import nullcontext
 
 import numpy as np
 
-from tendon_taichi.apps.bench import _designs
+from tendon_taichi.apps.bench import design_pair
 from tendon_taichi.body.problem import build_problem
 from tendon_taichi.body.scene import load_scene
 from tendon_taichi.optimizer.soft_ik import SoftIK
-from tendon_taichi.physics.model import Model
-from tendon_taichi.solve.cholesky import cholesky_class
-from tendon_taichi.solve.direct import DirectSolver
+from tendon_taichi.probes import around, timers
 from tendon_taichi.solve.newton import NewtonSolver
 
+#: the parts, each the probe (tendon_taichi/probes.py) of its name
 PARTS = ("factor", "solves", "assembly", "prepare", "check")
-
-
-@contextmanager
-def timed_parts(clock: dict):
-    """Time the parts (module docstring) into ``clock`` (part: [seconds, calls])
-    while inside; the methods are restored after."""
-    chol = cholesky_class()
-    targets = {"factor": (chol, "factor"), "solves": (chol, "solve"), "assembly": (Model, "hessian_sums"),
-               "prepare": (Model, "prepare_hessian"), "check": (DirectSolver, "_ordered_product")}
-    saved = {part: getattr(owner, name) for part, (owner, name) in targets.items()}
-
-    def wrap(part, method):
-        def timed(*args, **kwargs):
-            t = time.perf_counter()
-            try:
-                return method(*args, **kwargs)
-            finally:
-                clock[part][0] += time.perf_counter() - t
-                clock[part][1] += 1
-        return timed
-
-    for part, (owner, name) in targets.items():
-        setattr(owner, name, wrap(part, saved[part]))
-    try:
-        yield clock
-    finally:
-        for part, (owner, name) in targets.items():
-            setattr(owner, name, saved[part])
 
 
 def measure(scene, level: int, repeat: int) -> dict:
     """One level's warm equilibria, split into parts (module docstring)."""
     problem = build_problem(scene, level)
     a0, nodes = problem.fibers.a0, problem.mesh.nodes
-    r0, r1 = _designs(problem)
+    r0, r1 = design_pair(problem)
     ik = SoftIK(problem, scene.optimize, "direct")
     ik.configure(None)
     m, lin = ik.model, ik.linear
@@ -88,13 +62,12 @@ def measure(scene, level: int, repeat: int) -> dict:
     for _ in range(repeat):
         lin.reset()
         first = newton.solve(ac=r0 * a0, x0=nodes)
-        clock = {part: [0.0, 0] for part in PARTS}
-        with timed_parts(clock):
+        with timers(*PARTS) as clock:
             t = time.perf_counter()
             warm = newton.solve(ac=r1 * a0)
             total = time.perf_counter() - t
-        runs.append({"total": total, **{p: clock[p][0] for p in PARTS},
-                     "rest": total - sum(clock[p][0] for p in PARTS), "factorizations": clock["factor"][1]})
+        runs.append({"total": total, **{p: clock[p].seconds for p in PARTS},
+                     "rest": total - sum(clock[p].seconds for p in PARTS), "factorizations": clock["factor"].calls})
         m.set_positions(first.x)
     out = sorted(runs, key=lambda r: r["total"])[(len(runs) - 1) // 2]  # the median run's parts, which add up
     return {"level": level, "dofs": 2 * int(np.sum(~m.fixed)), "steps": warm.newton_iterations,
@@ -111,6 +84,7 @@ def main(argv=None) -> int:
     ap.add_argument("scene", nargs="?", default="t_shape")
     ap.add_argument("--levels", type=int, nargs="+", default=[2, 3, 4, 5, 6])
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--qdldl", action="store_true", help="factorize with qdldl where PARDISO loads too")
     args = ap.parse_args(argv)
     scene = load_scene(args.scene)
     cols = ("total",) + PARTS + ("rest",)
@@ -118,7 +92,8 @@ def main(argv=None) -> int:
           + " ".join(f"{c:>8}" for c in cols) + "   (ms)")
     rows = []
     for level in args.levels:
-        r = measure(scene, level, args.repeat)
+        with around("pardiso", lambda call: False) if args.qdldl else nullcontext():
+            r = measure(scene, level, args.repeat)
         rows.append(r)
         print(f"{level:>5} {r['dofs']:>6} {r['steps']:>5} {r['factorizations']:>7.0f} {r['entries']:>9} "
               + " ".join(f"{1e3 * r[c]:>8.2f}" for c in cols), flush=True)

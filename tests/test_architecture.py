@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: the layers, bottom first; a module may import its own layer and the ones below
 LAYERS = [
     ("tendon_taichi.version", "tendon_taichi.errors", "tendon_taichi.files", "tendon_taichi.tables",
-     "tendon_taichi._lazy"),
+     "tendon_taichi.probes", "tendon_taichi._lazy"),
     ("tendon_taichi.tasks",),
     ("tendon_taichi.objective",),
     ("tendon_taichi.body",),
@@ -199,3 +199,115 @@ def test_every_command_names_the_level_by_one_flag():
                 assert names[:2] == ["--level", "--resolution"] and action.dest == "level", (name, names)
                 with_level.add(name)
     assert {"design", "optimize", "simulate", "planted", "planted-bench", "bench"} <= with_level, with_level
+
+def _benchmark_trees() -> dict[str, ast.Module]:
+    """Every script under benchmarks/, parsed, by its path."""
+    return {p.relative_to(ROOT).as_posix(): ast.parse(p.read_text())
+            for p in sorted((ROOT / "benchmarks").rglob("*.py"))}
+
+
+def _root(node: ast.AST) -> str | None:
+    """The name an attribute chain starts from (``direct`` of ``direct.DirectSolver.x``)."""
+    while isinstance(node, (ast.Attribute, ast.Subscript)):
+        node = node.value
+    return node.id if isinstance(node, ast.Name) else None
+
+
+def _imported(tree: ast.Module) -> set[str]:
+    """The names a script binds to the package's modules, classes and functions by importing them."""
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names |= {a.asname or a.name.split(".")[0] for a in node.names if a.name.split(".")[0] == "tendon_taichi"}
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "tendon_taichi":
+            names |= {a.asname or a.name for a in node.names}
+    return names
+
+
+def _holds(value: ast.AST, imported: set[str], names: set[str]) -> bool:
+    """Whether ``value`` holds one of ``names`` itself: not what calling the package
+    returns (``SoftIK(...)`` is a new object), but ``targets.items()`` of an alias."""
+    if isinstance(value, ast.Name):
+        return value.id in names
+    if isinstance(value, ast.Call):
+        if _root(value.func) in imported:
+            return False
+        return any(_holds(a, imported, names) for a in [value.func, *value.args, *(k.value for k in value.keywords)])
+    return any(_holds(child, imported, names) for child in ast.iter_child_nodes(value))
+
+
+def _package_names(tree: ast.Module) -> set[str]:
+    """The names a script imports from the package, with the names it binds to
+    values made of them (``CALLERS = (routing, consolidation)``, ``for m in
+    CALLERS``): what an assignment through them would patch."""
+    imported = _imported(tree)
+    names, grown = set(imported), True
+    while grown:  # aliases of aliases
+        grown = False
+        for node in ast.walk(tree):
+            pairs = ([(t, node.value) for t in node.targets] if isinstance(node, ast.Assign)
+                     else [(node.target, node.iter)] if isinstance(node, (ast.For, ast.comprehension)) else [])
+            for target, value in pairs:
+                if (isinstance(target, ast.Tuple) and isinstance(value, ast.Tuple)
+                        and len(target.elts) == len(value.elts)):  # a, b = x, y: pair by pair
+                    pairs += list(zip(target.elts, value.elts))
+                elif _holds(value, imported, names):
+                    new = _bound(target) - names
+                    names |= new
+                    grown = grown or bool(new)
+    return names
+
+
+def _bound(target: ast.AST) -> set[str]:
+    """The names an assignment target binds (not ``so`` of ``so.minimize``)."""
+    if isinstance(target, ast.Name):
+        return {target.id}
+    if isinstance(target, (ast.Tuple, ast.List, ast.Starred)):
+        return set().union(*map(_bound, getattr(target, "elts", [getattr(target, "value", None)])))
+    return set()
+
+
+def _changed(node: ast.AST) -> list[ast.AST]:
+    """The objects whose attributes ``node`` sets or deletes: ``a.b`` of ``a.b.c = ...``
+    (or ``+=``, ``del``), ``x`` of ``setattr(x, ...)`` and ``delattr(x, ...)``."""
+    if isinstance(node, (ast.Assign, ast.AugAssign, ast.AnnAssign, ast.Delete)):
+        targets = getattr(node, "targets", None) or [node.target]
+        return [t.value for target in targets for t in ast.walk(target)
+                if isinstance(t, ast.Attribute) and isinstance(t.ctx, (ast.Store, ast.Del))]
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("setattr", "delattr"):
+        return node.args[:1]
+    return []
+
+
+def test_no_benchmark_assigns_to_a_package_attribute():
+    """Benchmarks time and watch the package through its probes
+    (``tendon_taichi/probes.py``), never by replacing its functions, methods or
+    settings: no assignment (``direct.DirectSolver.solve = ...``, through an alias
+    too) to an attribute of what they import from it, and no ``setattr`` or
+    ``delattr`` on it."""
+    found = []
+    for path, tree in _benchmark_trees().items():
+        names = _package_names(tree)
+        found += [f"{path}:{node.lineno} {ast.unparse(node).splitlines()[0]}" for node in ast.walk(tree)
+                  if any(_root(obj) in names for obj in _changed(node))]
+    assert not found, found
+
+
+def test_no_benchmark_uses_a_private_name_of_the_package():
+    """Benchmarks use the package's public names: no ``from tendon_taichi... import
+    _private`` (nor a private module), and no private attribute of what they import."""
+    found = []
+    for path, tree in _benchmark_trees().items():
+        names = _package_names(tree)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "tendon_taichi":
+                parts = node.module.split(".") + [a.name for a in node.names]
+            elif isinstance(node, ast.Import):
+                parts = [p for a in node.names if a.name.split(".")[0] == "tendon_taichi" for p in a.name.split(".")]
+            elif isinstance(node, ast.Attribute) and _root(node.value) in names:
+                parts = [node.attr]
+            else:
+                continue
+            private = [p for p in parts if p.startswith("_") and not p.endswith("__")]
+            found += [f"{path}:{node.lineno} {p}" for p in private]
+    assert not found, found

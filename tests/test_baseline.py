@@ -7,14 +7,14 @@ import pytest
 
 from tendon_taichi import build_problem, load_scene
 from tendon_taichi.apps.baseline import BaselineGradient
-from tendon_taichi.apps.bench import _designs
+from tendon_taichi.apps.bench import design_pair
 from tendon_taichi.optimizer.soft_ik import SoftIK
 
 
 @pytest.fixture(scope="module")
 def pair():
     p = build_problem(load_scene("t_shape"), 1)
-    r0, r1 = _designs(p)
+    r0, r1 = design_pair(p)
     ik = SoftIK(p, p.scene.optimize, "direct")
     ik.configure(None)  # stage 0: pose and contraction, what the baseline computes
     ik.restart(r0)

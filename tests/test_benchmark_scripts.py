@@ -38,7 +38,7 @@ def test_every_script_has_a_test():
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
               "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py",
               "warm_newton.py", "warm_parts.py", "auto_solver.py", "assembly.py", "multigrid.py", "pardiso_modes.py",
-              "route_gradients.py"}
+              "route_gradients.py", "kernel_launch.py"}
     assert scripts == tested
 
 
@@ -158,6 +158,13 @@ def test_warm_parts_splits_the_warm_equilibrium_into_parts_that_add_up():
         assert abs(sum(parts) - total) <= 0.04  # the rest is what the parts leave (to the printed 0.01 ms)
     assert out[3].startswith("exponents: total") and out[4].startswith("per factorization: ")
     assert "linear rest: " in out[4]
+
+
+def test_kernel_launch_times_both_call_paths_and_a_parallel_loop():
+    out = run(BENCH / "kernel_launch.py", "--launches", 50).stdout.splitlines()
+    assert out[0].startswith("through Taichi: ") and ", through the launcher: " in out[0]
+    taichi, launcher = (float(part.split()[0]) for part in out[0].split(": ")[1:3])
+    assert out[1].startswith("parallel: ") and taichi > 0 < launcher and float(out[1].split()[1]) > 0
 
 
 def test_simulate_levels_prints_each_level_and_solver():

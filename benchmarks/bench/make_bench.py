@@ -65,6 +65,12 @@ slopes of log(time) against log(DOFs) over the levels from the second on. Where
 `eq warm`'s time goes, part by part (the factorizations, their solves, the
 assembly), and why `direct`'s grows faster than the DOFs: "Where a warm
 equilibrium's time goes" in [method.md](method.md) (`benchmarks/warm_parts.py`).
+
+Two more scripts time what `bench` does not: `benchmarks/simulate_levels.py`, one equilibrium of
+`simulate t_shape --uniform 0.1` per level and backend after a warm-up, and the first solve of a
+process, which compiles the kernels; `benchmarks/bench/versus_commit.py`, `design` of this
+checkout against `optimize` and `compare` of an earlier commit installed in a virtual environment
+of its own, level by level.
 """
 
 

@@ -38,6 +38,12 @@ others are paid out); its gallery panel shows the first pose.
 |---|---|---|---|---|---|---|
 {rows}
 
+Two scripts work on a finished `tendon-taichi planted-bench` run of this suite:
+`benchmarks/planted/reextract.py` designs again from its cases' recordings with this code
+(extraction, consolidation and the front, without optimizing again) and scores the designs by the
+bench's rules; `benchmarks/planted/counts_by_level.py` tables each case's recommended count across
+resolution levels from the runs' `planted_bench.json` files.
+
 Regenerate everything (files, this README, the gallery):
 
 ```bash

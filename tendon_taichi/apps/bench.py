@@ -71,8 +71,10 @@ def _stats(values: list[float]) -> dict:
     return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
-def _designs(problem, seed: int = 0):
-    """A design (contraction ratios 2-8 %) and a nearby one (+-0.5 %)."""
+def design_pair(problem, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A design and a nearby one, the contraction ratios ``bench``'s warm equilibrium
+    goes between (and the benchmarks beside it): ``r0`` (n_fibers,) drawn from 2-8 %
+    by ``seed``, and ``r1``, each ratio of ``r0`` moved by at most +-0.5 % of itself."""
     rng = np.random.default_rng(seed)
     r0 = rng.uniform(0.02, 0.08, problem.fibers.n_fibers)
     return r0, r0 * (1 + 0.005 * rng.uniform(-1, 1, len(r0)))
@@ -81,7 +83,7 @@ def _designs(problem, seed: int = 0):
 def measure_solver(problem, solver: str, repeat: int, forward_max_fibers: int, progress) -> dict:
     """Equilibria, adjoint, gradient and forward sensitivities with one backend."""
     a0 = problem.fibers.a0
-    r0, r1 = _designs(problem)
+    r0, r1 = design_pair(problem)
     ik = SoftIK(problem, problem.scene.optimize, solver)
     ik.configure(None)  # pose + contraction: what soft IK differentiates
     m, lin = ik.model, ik.linear
@@ -143,7 +145,7 @@ def measure_baseline(problem, repeat: int, progress) -> dict:
     """The gradient of :func:`measure_solver` (warm equilibrium at the nearby design
     from the first's, then the adjoint) by the numpy/scipy baseline (:mod:`.baseline`)."""
     base = BaselineGradient(problem, problem.scene.optimize.contraction_reg)
-    r0, r1 = _designs(problem)
+    r0, r1 = design_pair(problem)
     x0 = base.equilibrium(r0 * problem.fibers.a0, problem.mesh.nodes)
     times = []
     for _ in range(repeat):

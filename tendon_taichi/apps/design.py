@@ -156,8 +156,8 @@ def warm_up() -> float:
     consolidating it take about a minute, and the pose it reaches is not checked
     against a budget (:func:`check_reach`). It runs one extractor
     (:data:`WARM_UP_EXTRACTOR`, else every installed one): every extractor's layout
-    is solved by the same kernels, and the three built-in ones' dense layouts took
-    6.2 s to solve against 2.5 s for one (the worker then joins a level-2 design's
+    is solved by the same kernels, and the three built-in ones' dense layouts take
+    longer to solve than one's (the worker then joins a level-2 design's
     consolidations from their start, not midway)."""
     from ..body.scene import load_scene, with_overrides
     from ..extract.plugins import available_extractors
@@ -397,8 +397,8 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], bud
 def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool, pool: Pool) -> dict:
     """The drawing, the pictures and the routes logged into the recording. The
     pictures are drawn by a worker of ``pool`` where it has one, while this process
-    writes the rest (they took a level-2 design's last second, matplotlib's import
-    included, which the workers did as they started)."""
+    writes the rest (drawing them, matplotlib's import included, which the workers
+    did as they started, was the end of a design)."""
     problem = ex.problem
     tendons = layout.tendons()
     title = f"{problem.scene.name} level {problem.level}: {layout.count} tendon(s), as built " \

@@ -94,6 +94,7 @@ import numpy as np
 
 from ..body.problem import Problem
 from ..objective.settings import OptimizeSettings
+from ..probes import probe
 from ..tasks.pool import Pool
 from .consolidation import Candidate, Consolidation, Layout, _Search, positions, route_settings
 from .protocol import IdealizedState
@@ -537,6 +538,7 @@ def _extensions(search: _Search, layouts: list[Layout], size: float, rounds: int
     return [None if lay is None else next(done) for lay in best]
 
 
+@probe("screened")
 def _screened(search: _Search, layout: Layout, routes: list[Route]) -> Layout | None:
     """``routes`` (``layout``'s with one extended) solved from ``layout``'s
     contractions and equilibria, oriented, and their routes optimized one round of at
@@ -555,6 +557,7 @@ def _screen_task(spec: tuple, job: tuple[Layout, list[Route]]) -> tuple[Layout |
     return _screened(search, *job), search.tally()
 
 
+@probe("continued")
 def _continued(search: _Search, layout: Layout, rounds: int) -> Layout:
     """A screened ``layout`` (:func:`_screened`) finished: its routes optimized on,
     at most ``rounds`` rounds."""

@@ -29,6 +29,7 @@ from ..optimizer.gauss_newton import target_jacobian  # noqa: F401  (its import 
 from ..optimizer.homotopy import RunCallbacks, run_stage
 from ..optimizer.soft_ik import SoftIK, pose_errors
 from ..physics.model import Model
+from ..probes import probe
 from ..solve.newton import NewtonSolver
 from .protocol import IdealizedState, Tendon
 
@@ -134,6 +135,7 @@ def pose_tension(state: IdealizedState, tendon: Tendon) -> float:
     return float(state.tau[tendon.fibers].mean()) if len(tendon.fibers) else tendon.tension
 
 
+@probe()
 def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedState,
                      settings: OptimizeSettings, solver: str = "auto", tensions=None,
                      start=None, positions=None) -> RealizableResult:

@@ -47,6 +47,7 @@ from ..objective.settings import OptimizeSettings
 from ..optimizer.soft_ik import SoftIK
 from ..physics.capstan import perp
 from ..physics.waypoints import rest_point_gradient
+from ..probes import probe
 from .realizable import tendon_cables
 from .routes import Route, polyline_length
 
@@ -240,6 +241,7 @@ class RouteObjective:
         route has shrunk to a point (``COLLAPSED``)."""
         return self.value(z), self.gradient(z)
 
+    @probe()
     def value(self, z: np.ndarray) -> float:
         """O at z, each pose's equilibrium solved; its gradient by :meth:`gradient`.
         Raises as :meth:`evaluate` does."""
@@ -288,6 +290,7 @@ class RoutedLayout:
     message: str
 
 
+@probe()
 def optimize_routes(problem: Problem, routes: list[Route], ratios: np.ndarray, settings: OptimizeSettings,
                     route_settings: RouteSettings, solver: str = "auto", positions=None,
                     on_iteration=None) -> RoutedLayout:

@@ -33,7 +33,7 @@ def save_png(fig, path: str | Path, dpi: int) -> Path:
 
 
 def load() -> None:
-    """Import what the pictures use of matplotlib (about 0.4 s) ahead of the first
+    """Import what the pictures use of matplotlib (a noticeable start-up) ahead of the first
     one: ``design``'s workers do as they start, and draw its pictures."""
     import matplotlib.backends.backend_agg  # noqa: F401 - what savefig writes a PNG with
     from matplotlib.collections import LineCollection  # noqa: F401

@@ -29,6 +29,7 @@ from ..objective.settings import OptimizeSettings
 from ..objective.term import State
 from ..objective.terms import registered
 from ..physics.model import Model
+from ..probes import probe
 from ..solve.frictional import solve_jacobian
 from ..solve.newton import Equilibrium, NewtonSolver
 
@@ -170,6 +171,7 @@ class PoseSolve:
         self.pred = (eq.x, ac)
         return eq
 
+    @probe()
     def adjoint(self, rhs: np.ndarray) -> np.ndarray:
         """lambda = J^-T dO/dx, J the equilibrium's Jacobian (the Hessian H, plus the
         capstan term with friction), warm started from the last one (iterative backends)."""
@@ -199,6 +201,7 @@ class SoftIK:
     and the contraction regularizer only.
     """
 
+    @probe()
     def __init__(self, problem: Problem, settings: OptimizeSettings, solver: str = "auto",
                  cables=None):
         self.problem, self.settings = problem, settings
@@ -223,6 +226,7 @@ class SoftIK:
         self.adjoints: list[np.ndarray] = []
 
     # ------------------------------------------------------------ stages
+    @probe()
     def configure(self, k: float | None) -> None:
         """Stage 0 (``k`` None): the terms that are on in every stage (pose,
         contraction); else every term, those that read ``k`` at this ``k``."""
@@ -240,6 +244,7 @@ class SoftIK:
         """A stacked (P C,) vector as (P, C)."""
         return np.asarray(v, dtype=float).reshape(len(self.poses), self.n_cables)
 
+    @probe()
     def restart(self, r: np.ndarray) -> list[Equilibrium]:
         """The canonical start of a stage: each pose's equilibrium at ``r`` solved
         from rest, and cold adjoints."""
@@ -265,6 +270,7 @@ class SoftIK:
         self.objective = self._objective(cables.a0)
         self.configure(self.k)
 
+    @probe()
     def warm_start(self, positions: list[np.ndarray]) -> None:
         """Start from each pose's ``positions`` (n, 2) instead of rest, with cold adjoints."""
         self._last = None
@@ -273,6 +279,7 @@ class SoftIK:
             ps.linear.reset()
             ps.model.set_positions(x)
 
+    @probe()
     def settle(self, r: np.ndarray) -> list[Equilibrium]:
         """Each pose's equilibrium at ``r`` solved to the stage-state tolerance from
         where the poses are (not from rest). The next evaluation starts from these
@@ -284,6 +291,7 @@ class SoftIK:
         return [ps.state_newton.solve(ac=ac[i]) for i, ps in enumerate(self.poses)]
 
     # ------------------------------------------------------------ evaluation
+    @probe()
     def evaluate(self, r: np.ndarray) -> tuple[float, np.ndarray]:
         """Objective and its gradient w.r.t. r at the poses' equilibria for r."""
         return self.value(r), self.gradient()

@@ -20,7 +20,7 @@ energy is ``d2E/(dx dac_c) = tau_ac_c dL_c/dx``.
 Node forces are *gathered* per node (no atomics) and sums run over fixed
 blocks, so results are bit-for-bit deterministic. ``serial`` is a compile-time
 switch: small models run their loops serialized (on the CPU a parallel loop
-costs ~0.1 ms to dispatch), large ones in parallel where there are threads to
+costs ~0.1 ms to dispatch: benchmarks/kernel_launch.py), large ones in parallel where there are threads to
 spare (:func:`~.runtime.parallel_threshold`); every kernel exists at
 most twice per process. The ``k_`` functions are kernels (one launch each).
 """

@@ -7,8 +7,8 @@ argument processing, the template mapping and checks that give the same answer
 every time for a given kernel and kind of arguments. :func:`kernel` is
 ``ti.kernel`` whose launches, after the first of each kind through Taichi
 (which compiles and checks it), reuse that compiled kernel and set the
-arguments directly: 4x less per launch, the same compiled code, the same
-numbers. A call whose arguments are of a kind not seen yet (another template
+arguments directly: 4x less per launch (both figures: benchmarks/kernel_launch.py),
+the same compiled code, the same numbers. A call whose arguments are of a kind not seen yet (another template
 value, another array dtype or rank, a non-contiguous numpy array, another
 Taichi program) goes through Taichi.
 """
@@ -125,7 +125,7 @@ class FastKernel:
 def _reader(ret_type, index: tuple):
     """A function reading a returned value of ``ret_type`` at ``index`` from a launch
     context - a number, or a vector's entries as a tuple of numbers - in place of
-    Taichi's objects for them (a ``ti.Vector`` costs 20 us to make); None: Taichi's way."""
+    the ``ti.Vector`` Taichi makes for them; None: Taichi's way."""
     from taichi.lang.matrix import VectorType
     from taichi.types import primitive_types
 

@@ -21,6 +21,7 @@ import numpy as np
 from ..body.cables import CableSet
 from ..body.mesh import Mesh
 from ..body.scene import Material
+from ..probes import probe
 from . import forces, runtime
 from .buffers import k_copy_nodes, k_read, k_read_int, k_read_ranges, k_write, k_write_int, k_write_ranges
 from .capstan import Capstan, FrictionJacobian, PointMap
@@ -155,8 +156,7 @@ class Model:
         #: else None: the copy kernels move the arrays)
         self._fb_host, self._ib_host = runtime.host_view(self.fb), runtime.host_view(self.ib)
         # filled through the host's view where there is one: a copy, where from_numpy launches a
-        # kernel (with :func:`_body_arrays`, a level-3 tendon robot is made in 1.0 ms instead of 3.4,
-        # the same bytes; a level-3 design makes about 600)
+        # kernel (with :func:`_body_arrays`; the same bytes, and a level-3 design makes about 600)
         if self._fb_host is not None and self._ib_host is not None:
             self._fb_host[:] = host.fb
             self._ib_host[:] = host.ib
@@ -332,6 +332,7 @@ class Model:
         self.gradient_norm2()
         return self.last_gradient.reshape(self.n, 2).copy()
 
+    @probe("prepare")
     def prepare_hessian(self, project: bool = False, jacobi: bool = True) -> None:
         """Element tangents (exact or PSD-projected), cable stiffnesses and (``jacobi``)
         the block-Jacobi preconditioner at the current x."""
@@ -433,6 +434,7 @@ class Model:
         forces.k_hessian_entries(self.fb, self.ib, out, self.serial)
         return out
 
+    @probe("assembly")
     def hessian_sums(self, scatter: np.ndarray, bins: int) -> np.ndarray:
         """The :meth:`hessian_entries` summed into ``bins`` bins, entry k into bin
         ``scatter[k]`` (int32, (36 m + 144 S,), each < ``bins``): what

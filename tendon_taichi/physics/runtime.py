@@ -30,19 +30,21 @@ ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu")
 
 #: Models with at least this many elements + cable segments run their loops
 #: in parallel; smaller ones run them serialized, because a parallel loop
-#: costs a fixed ~0.1 ms to dispatch on the CPU backend (measured by bench).
+#: costs a fixed ~0.1 ms to dispatch on the CPU backend (benchmarks/kernel_launch.py).
 DEFAULT_PARALLEL_THRESHOLD = 20000
 
 #: ... where Taichi's loops have at least this many threads (:func:`cpu_threads`); with
 #: fewer, every model runs them serialized. On 2 cores parallel loops were slower at every
-#: size measured: t_shape at level 6 (36k elements + segments; ``bench``: a direct gradient
+#: size measured (``tendon-taichi bench``, with ``TENDON_TAICHI_PARALLEL_THRESHOLD=0`` and
+#: without): t_shape at level 6 (36k elements + segments: a direct gradient
 #: 0.085 s serialized against 0.109 s, a cg equilibrium from rest 0.64 s against 0.97 s), as
 #: fast at level 7 (73k) and level 8 (146k; a warm direct equilibrium 0.80-0.84 s against
 #: 0.84-0.85 s). With more threads they were not measured: the threshold above stays there
 PARALLEL_MIN_THREADS = 3
 
 #: BLAS threads (numpy, scipy): our vectors are short (<= ~1e5) and threaded
-#: OpenBLAS made a level-5 warm CG solve 3.5x slower (72 vs 250 ms, bench)
+#: OpenBLAS made a level-5 warm CG solve 3.5x slower (72 vs 250 ms, ``tendon-taichi bench``
+#: with ``TENDON_TAICHI_BLAS_THREADS`` 1 and 2)
 DEFAULT_BLAS_THREADS = 1
 
 _settings = {
@@ -145,7 +147,7 @@ def _plain_source_positions() -> None:
     """Taichi's compiler describes the source position of every syntax node it
     visits, word-wrapping the line and a caret under it for an error message that
     is almost never shown: about 0.6 s of every process's kernel compilation
-    (py-spy, ``design`` at level 2), whether or not the kernels come from the
+    (``py-spy record -- tendon-taichi design t_shape --resolution 2``), whether or not the kernels come from the
     cache. Describe it by file, line and that line's text alone; the compiled
     kernels are the same."""
     from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
@@ -161,7 +163,7 @@ def _plain_source_positions() -> None:
 #: s after which Taichi's kernel-cache lock file is stale: Taichi holds it while it reads or writes
 #: the cache (well under a second) and removes it after; a process killed meanwhile leaves it, and
 #: then every later process fails to take it (three warnings), skips the cache and compiles every
-#: kernel again (5-6 s a process on 2 cores, each worker included)
+#: kernel again, in every process, each worker included
 STALE_LOCK_S = 60.0
 
 
@@ -263,8 +265,7 @@ def factor_threads() -> int:
     process that has its cores to itself; one while it shares them with worker
     processes (:func:`cores_shared`) or is one of them.
     Threads that wait for a core another process holds make a factorization many
-    times slower (a level-3 design with one worker: 61 s on one thread each, 99 s
-    with the finer mesh's factorizations on two)."""
+    times slower."""
     if _state["cores_shared"]:
         return 1
     n = _env_int("TENDON_TAICHI_FACTOR_THREADS")

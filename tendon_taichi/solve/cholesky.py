@@ -13,6 +13,7 @@ import numpy as np
 import qdldl
 import scipy.sparse as sp
 
+from ..probes import probe
 from ._csc import triangle
 from .pardiso import PardisoLDL
 from .pardiso import available as pardiso_available
@@ -39,6 +40,7 @@ class LDL:
         """An LDL of the same pattern, not factorized."""
         return LDL(*self._pattern, reorder=self.reorder)
 
+    @probe("factor")
     def factor(self, data: np.ndarray) -> bool:
         """Factorize the matrix of entries ``data`` (in the pattern's order); whether
         it is positive definite (every pivot > 0), else the factors are not to be used."""
@@ -50,6 +52,7 @@ class LDL:
         self.generation += 1
         return bool(np.all(self.solver.factors()[1] > 0.0))
 
+    @probe("solves")
     def solve(self, b: np.ndarray) -> np.ndarray:
         """A^-1 b with the current factorization, b (n,) or (n, r)."""
         if np.ndim(b) == 2:

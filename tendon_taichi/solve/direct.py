@@ -19,8 +19,8 @@ that of the elements and the segments alone, and its ordering - the
 elements' - is computed once per mesh and shared by every tendon layout.
 
 When a route moves (route optimization), a few of its points cross into other
-triangles; a new pattern would need a new analysis of the factorization (at
-level 3 about 2.5 ms against 1 ms for the numbers). Where the current pattern
+triangles; a new pattern would need a new analysis of the factorization,
+which costs more than its numbers. Where the current pattern
 lacks the entries of at most :data:`DETACHED_MAX` segments it is kept, and
 those segments are *detached* (:meth:`DirectSolver._reattach`): each one's
 rank-one block is split into a part within its points' triangles, which every
@@ -29,6 +29,7 @@ pattern holds, and one more low-rank column."""
 from __future__ import annotations
 
 import weakref
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from functools import cached_property, partial
 from typing import Callable, Iterable, Iterator
@@ -40,6 +41,7 @@ import scipy.sparse.linalg as spla
 from ..errors import ConvergenceError
 from ..physics.capstan import perp
 from ..physics.model import Model
+from ..probes import probe
 from ._newton_kernels import direction_from
 from .cholesky import LDL, cholesky_class
 from .linear import LinearSolver, LinearStats
@@ -73,6 +75,7 @@ class Factorization:
     else SuperLU - with the low-rank part by Woodbury's identity; :meth:`solve`
     works in the free-DOF numbering (``order`` maps it to the ordered one)."""
 
+    @probe("factorization")
     def __init__(self, H: Assembled, order: np.ndarray, ldl: LDL | PardisoLDL | None = None,
                  indefinite: Callable[[], PardisoLDL | None] | None = None):
         self.Hp, self.ldl, self.lu = H.Hp, None, None
@@ -186,6 +189,7 @@ class _Pattern:
         return np.repeat(np.arange(nf, dtype=np.int64), np.diff(self.indptr)) * nf + self.indices
 
 
+@probe("indefinite")
 def _indefinite(pattern: _Pattern) -> PardisoLDL | None:
     """The pattern's PARDISO indefinite factorization, made the first time a matrix
     of it is not positive definite (a new pattern's Cholesky almost always
@@ -452,6 +456,7 @@ class DirectSolver(LinearSolver):
         self.factor = lu
         return y
 
+    @probe("check")
     def _ordered_product(self, H: Assembled, y: np.ndarray) -> np.ndarray:
         """H y from the ordered matrix, in the free-DOF numbering."""
         yp = np.empty_like(y)
@@ -530,6 +535,16 @@ class DirectSolver(LinearSolver):
         factorization (one triangular solve each)."""
         for j, b in enumerate(rhs):
             yield self.solve(b, tol=tol) if j == 0 else self.resolve(b)
+
+
+@contextmanager
+def detached_at_most(n: int) -> Iterator[None]:
+    """Within, every direct solver's :attr:`~DirectSolver.detached_max` is ``n`` (0: patterns made anew)."""
+    before, DirectSolver.detached_max = DirectSolver.detached_max, n
+    try:
+        yield
+    finally:
+        DirectSolver.detached_max = before
 
 
 def _recent(cache: dict, key, make, keep: int):

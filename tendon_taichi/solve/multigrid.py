@@ -124,9 +124,8 @@ class GeometricMultigridPreconditioner(ReusedPreconditioner):
     ``refresh_iterations``: a solve that takes more iterations than this marks
     the hierarchy stale. A fresh one preconditions the solves of t_shape's Newton
     steps to 4-40 iterations at levels 4 and 6, and rebuilding it costs about ten
-    of them: at 30 a cold equilibrium at level 6 took 0.96 s and a warm one 0.32 s,
-    at 20 0.94 and 0.37 s, at 45 1.7 and 0.40 s, at 80 (the algebraic one's) 1.7
-    and 1.1 s."""
+    of them: of 20, 30, 45 and 80 (the algebraic one's), 30 gave the fastest warm
+    equilibria at level 6, and cold ones about as fast as 20."""
 
     def __init__(self, model: Model, refresh_iterations: int = 30):
         super().__init__(model, refresh_iterations, ordered=False)

@@ -21,7 +21,8 @@
   (:mod:`.secant`), and the factorization is refreshed only when a step leaves
   more than 0.7 of the residual (0.5 after plain chord steps): the same
   evaluations of t_shape's optimization at level 5 take 12 % less time (a
-  quarter fewer factorizations), at levels 2 and 3 about as long;
+  quarter fewer factorizations), at levels 2 and 3 about as long
+  (benchmarks/secant_replay.py);
 * with capstan friction (:mod:`tendon_taichi.physics.capstan`) the weights
   are set from the current angles before every step and frozen inside it, so
   the converged state balances the frictional forces.

@@ -24,27 +24,29 @@ each this way (the failed Cholesky and the analysis once per pattern included),
 The ordering. A fiber lattice's matrix comes in the direct backend's
 fill-reducing order of its whole pattern (minimum degree, computed once per
 model), and PARDISO keeps it (an identity ``perm``, ``iparm[4] = 1``): it then
-factorizes as fast as in its own minimum degree order and a quarter faster than
-in its METIS order at levels 4-5, and its analysis is the cheapest. On t_shape's
-lattice (one thread) one factorization takes 0.65 / 1.6 / 4.3 / 12 / 33 ms
-against qdldl's 1.2 / 3.8 / 12.5 / 40 / 122 ms at 1394 / 2716 / 5336 / 10504 /
-20812 DOFs (levels 2-6), on finger's 0.38 / 1.05 ms against 0.72 / 2.4 ms at
-880 / 1702 DOFs (levels 2, 3). A tendon robot's pattern comes in the elements'
-order alone (shared by every tendon layout of a mesh), which does not see the
-couplings the segments add along each route: in it the factors of a level-2
-finger's robots held up to 3x the entries and took up to 4x as long, so those
-patterns are ordered by PARDISO's own minimum degree (``reorder``), as qdldl
-orders every pattern by its AMD: about 0.25 ms each, qdldl's 0.23-0.34 ms. So
-the direct backend takes PARDISO at every size where it loads. Without the
-extra the numbers are qdldl's: the same designs up to round-off, which the
+factorizes as fast as in its own minimum degree order and faster than in its
+METIS order, and its analysis is the cheapest. On t_shape's lattice (one
+thread) one factorization takes 0.65 / 1.6 / 4.3 / 12 / 33 ms against qdldl's
+1.2 / 3.8 / 12.5 / 40 / 122 ms at 1394 / 2716 / 5336 / 10504 / 20812 DOFs
+(levels 2-6), on finger's 0.38 / 1.05 ms against 0.72 / 2.4 ms at 880 / 1702
+DOFs (levels 2, 3): PARDISO's by benchmarks/pardiso_modes.py (plain, one
+thread), qdldl's by ``benchmarks/warm_parts.py --qdldl`` (factor / factors).
+A tendon robot's pattern comes in the elements' order alone (shared by every
+tendon layout of a mesh), which does not see the couplings the segments add
+along each route: in it the factors of a level-2 finger's robots held several
+times the entries and took longer still, so those patterns are ordered by
+PARDISO's own minimum degree (``reorder``), as qdldl orders every pattern by its
+AMD. So the direct backend takes PARDISO at every size where it loads. Without
+the extra the numbers are qdldl's: the same designs up to round-off, which the
 search can turn into another layout here and there.
 
 Threads. From :data:`PARALLEL_MIN` DOFs a factorization runs on the process's
 threads (:func:`~tendon_taichi.physics.runtime.factor_threads`: its cores where it
 has them to itself - ``optimize``, ``simulate``, ``bench`` -, one in ``design``,
 whose worker processes hold the other cores, and in every worker): at level 5
-about 1.7x faster on two. Its numbers do not depend on the threads: there
-PARDISO runs in its conditional numerical reproducibility mode (:data:`CNR`), in
+about 1.7x faster on two (benchmarks/pardiso_modes.py). Its numbers do not
+depend on the threads: there PARDISO runs in its conditional numerical
+reproducibility mode (:data:`CNR`), in
 which the factors of t_shape's lattices at levels 4, 5 and 6 and of its tendon
 patterns in PARDISO's own order solve to the same bits on one, two and three
 threads, and whatever the mode's number - one right-hand side at a time: several
@@ -58,7 +60,7 @@ sequential substitution onto its parallel one, a BLAS call per supernode: one
 solve of t_shape's lattice at levels 2 / 3 / 5 takes 127 / 248 / 1354 us in
 the mode against 51 / 111 / 824 us without, on one thread
 (``python benchmarks/pardiso_modes.py``), and ``design t_shape --resolution 2``
-spent a quarter of its time in them. Below
+spent much of its time in them. Below
 :data:`PARALLEL_MIN` a factorization runs on one thread whatever the process,
 the same bits without the mode, so it is on only from there
 (:attr:`PardisoLDL.reproducible`). With MKL's Intel OpenMP layer (its GNU
@@ -79,6 +81,7 @@ from ctypes.util import find_library
 import numpy as np
 
 from ..physics import runtime
+from ..probes import probe
 from ._csc import triangle
 
 _lib: dict = {}
@@ -88,15 +91,17 @@ MKL_THREADING_INTEL, MKL_THREADING_SEQUENTIAL = 0, 1
 
 #: the least order of a matrix that is factorized on several threads. From there
 #: a whole optimization is faster (t_shape on 2 cores: level 4 43.5 s against
-#: 48.5, level 5 about 15 % less); at level 3 (2716 DOFs) a factorization is
-#: faster too (0.96 against 1.55 ms) but the optimization is not (27-32 s against
-#: 27-28: the second thread's waits cost the kernels around it), at level 2 not
-#: even the factorization (0.62 against 0.57 ms)
+#: 48.5, level 5 about 15 % less; ``tendon-taichi optimize t_shape --resolution 4``
+#: against the same with ``TENDON_TAICHI_FACTOR_THREADS=1``); at level 3 (2716 DOFs)
+#: a factorization is faster too (0.96 against 1.55 ms) but the optimization is not
+#: (the second thread's waits cost the kernels around it), at level 2 not even the
+#: factorization (0.62 against 0.57 ms; the factorizations: benchmarks/pardiso_modes.py)
 PARALLEL_MIN = 4000
 
 #: ``iparm[33]`` from :data:`PARALLEL_MIN` DOFs: PARDISO's conditional numerical reproducibility
 #: mode (CNR) on, the same bits on any number of threads (module docstring); any value above 0
-#: gave the same bits and speed. Below, 0: one thread, and solves 2.2-2.5x faster (levels 2-3)
+#: gave the same bits and speed. Below, 0: one thread, and solves 2.2-2.5x faster (levels 2-3,
+#: benchmarks/pardiso_modes.py)
 CNR = 1
 
 
@@ -124,6 +129,7 @@ def _load():
     return fn
 
 
+@probe("pardiso")
 def available() -> bool:
     """Whether MKL PARDISO loaded (the ``mkl`` extra is installed)."""
     return _load() is not None
@@ -173,8 +179,9 @@ def _threading_layer(mkl_rt: str) -> int:
     then, MKL ends the process."""
     if not os.environ.get("KMP_BLOCKTIME"):
         # an idle thread spins 1 ms, then sleeps: OpenMP's 200 ms holds a core the work
-        # between factorizations needs, 0 wakes it too often (t_shape at level 5, 60
-        # iterations per stage: 35-36 s against 40.6 and 40.5)
+        # between factorizations needs, 0 wakes it too often (35-36 s against 40.6 and
+        # 40.5: ``tendon-taichi optimize t_shape --resolution 5 --stage-iterations 60``
+        # with KMP_BLOCKTIME 1, 200 and 0)
         os.environ["KMP_BLOCKTIME"] = "1"
     for name in (os.path.join(os.path.dirname(os.path.realpath(mkl_rt)), "libiomp5.so"), "libiomp5.so"):
         try:
@@ -288,6 +295,7 @@ class PardisoLDL:
         """The threads PARDISO ran its last phase on, as it reports them."""
         return int(self._iparm[2])
 
+    @probe("factor")
     def factor(self, data: np.ndarray) -> bool:
         """Factorize the matrix of entries ``data`` (in the pattern's order); whether
         it is positive definite (PARDISO's Cholesky met no pivot <= 0: its error -4)
@@ -303,6 +311,7 @@ class PardisoLDL:
         self.generation += 1
         return err == 0 and not (self.indefinite and self._iparm[13] > 0)
 
+    @probe("solves")
     def solve(self, b: np.ndarray) -> np.ndarray:
         """A^-1 b with the current factorization, b (n,), or (n, r): r columns in one
         call, or in the reproducible mode one call per column - there PARDISO's

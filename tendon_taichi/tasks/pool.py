@@ -298,6 +298,6 @@ class Pool:
     def __exit__(self, kind, value, tb) -> None:
         """Leaving stops the workers at once (:meth:`close` with ``terminate``), the
         work done or not: every result asked for is in, and the job's process need not
-        wait at its own exit for idle workers to shut down (``design``'s process ended
-        0.5 s after its result, now 0.23 s); one still setting up cleans up first."""
+        wait at its own exit for idle workers to shut down; one still setting up cleans
+        up first."""
         self.close(terminate=True)
