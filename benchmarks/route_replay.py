@@ -34,6 +34,7 @@ import sys
 import tempfile
 import time
 from contextlib import ExitStack
+from unittest import mock
 
 import numpy as np
 import scipy.optimize as so
@@ -118,20 +119,15 @@ def same_points(calls: list[tuple], reference: int, other: int) -> tuple[float, 
         return so.OptimizeResult(x=z0, message="replayed")
 
     recorded, worst = [], [0.0, 0.0, 0]
-    try:
-        with runtime.cores_shared():
-            so.minimize = recording
-            with direct.detached_at_most(reference):
-                for args, kwargs in calls:
-                    asked.clear()
-                    routing.optimize_routes(*args, **kwargs)
-                    recorded.append(list(asked))
-            so.minimize = playing
-            with direct.detached_at_most(other):
-                for args, kwargs in calls:
-                    routing.optimize_routes(*args, **kwargs)
-    finally:
-        so.minimize = real
+    with runtime.cores_shared():  # scipy's minimize swapped for the recorder, then the player
+        with mock.patch.object(so, "minimize", recording), direct.detached_at_most(reference):
+            for args, kwargs in calls:
+                asked.clear()
+                routing.optimize_routes(*args, **kwargs)
+                recorded.append(list(asked))
+        with mock.patch.object(so, "minimize", playing), direct.detached_at_most(other):
+            for args, kwargs in calls:
+                routing.optimize_routes(*args, **kwargs)
     return worst[0], worst[1], worst[2]
 
 
