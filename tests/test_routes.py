@@ -79,9 +79,9 @@ def test_clearance_is_held_between_the_points_it_looks_at():
     two of the points the push looks at: the route keeps the clearance along its
     whole polyline, not only at those points (with four points per segment alone
     it came to 0.997 c of the corner)."""
-    from tendon_taichi.body.geometry import Walls
+    from tendon_taichi.body.geometry import PolygonWalls
 
-    walls = Walls.from_outline(np.array([[0, 0], [0.1, 0], [0.1, 0.1], [0.06, 0.1], [0.047, 0.06], [0.04, 0.1],
+    walls = PolygonWalls.from_outline(np.array([[0, 0], [0.1, 0], [0.1, 0.1], [0.06, 0.1], [0.047, 0.06], [0.04, 0.1],
                                          [0, 0.1]]), [])
     size = 0.1 * np.sqrt(2)
     c = 0.02 * size

@@ -11,5 +11,8 @@ __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     ".mesh": ("Mesh", "Embedding", "triangulate_polygon", "read_mesh", "refine"),
     ".fibers": ("FiberGraph", "FiberPairs", "build_lattice"),
     ".cables": ("CableSet",),
-    ".problem": ("Problem", "build_problem", "level_scale", "LevelScale"),
+    ".problem": ("Problem", "build_problem"),
+    ".level": ("level_scale", "LevelScale"),
+    ".walls": ("Walls",),
+    ".dimension": ("Dimension", "DIMENSIONS", "dimension_of", "register_dimension"),
 })

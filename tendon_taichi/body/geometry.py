@@ -9,7 +9,7 @@ import shapely
 
 
 def bbox_diagonal(points: np.ndarray) -> float:
-    """The diagonal of the bounding box of ``points`` (k, 2), m: the body size L
+    """The diagonal of the bounding box of ``points`` (k, dim), m: the body size L
     when they are a body's."""
     return float(np.linalg.norm(np.ptp(points, axis=0)))
 
@@ -145,10 +145,11 @@ def segment_params_on_edges(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: 
     return out
 
 
-class Walls:
-    """The body's walls - its outline and holes - as one shapely polygon, for the
-    clearance of tendon routes: signed distances of points from the nearest wall
-    (positive inside the body) and their gradients."""
+class PolygonWalls:
+    """The walls of a 2D body - its outline and holes - as one shapely polygon, for
+    the clearance of tendon routes: signed distances of points from the nearest wall
+    (positive inside the body) and their gradients; the plane's implementation of
+    the walls protocol (:class:`~.walls.Walls`)."""
 
     def __init__(self, polygon):
         self.polygon = polygon
@@ -156,11 +157,11 @@ class Walls:
         shapely.prepare(self.polygon)
 
     @classmethod
-    def from_outline(cls, outline: np.ndarray, holes) -> "Walls":
+    def from_outline(cls, outline: np.ndarray, holes) -> "PolygonWalls":
         return cls(shapely.Polygon(outline, [np.asarray(h) for h in holes]))
 
     @classmethod
-    def from_triangles(cls, corners: np.ndarray) -> "Walls":
+    def from_triangles(cls, corners: np.ndarray) -> "PolygonWalls":
         """From a mesh's triangles (m, 3, 2): their union."""
         return cls(shapely.union_all(shapely.polygons(corners)))
 
@@ -169,8 +170,12 @@ class Walls:
         inside the body, negative outside."""
         p = np.asarray(points, dtype=float).reshape(-1, 2)
         d = shapely.distance(shapely.points(p), self.boundary)
-        inside = shapely.intersects_xy(self.polygon, p[:, 0], p[:, 1])
-        return np.where(inside, d, -d)
+        return np.where(self.inside(p), d, -d)
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """bool (q,): whether each point (q, 2) lies in the body, its walls included."""
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        return shapely.intersects_xy(self.polygon, p[:, 0], p[:, 1])
 
     def distance_gradient(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Signed distances (q,) and their gradients (q, 2): the unit vector from the

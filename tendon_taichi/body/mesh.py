@@ -40,10 +40,22 @@ class Embedding:
 
 @dataclass(frozen=True, eq=False)
 class Mesh:
-    """A 2D triangle mesh: ``nodes`` (n, 2) m, ``triangles`` (m, 3) counter-clockwise."""
+    """A mesh of simplices of ``dim + 1`` nodes: ``nodes`` (n, dim) m and
+    ``triangles`` (m, dim + 1) - in 2D, the only dimension built so far,
+    triangles, counter-clockwise."""
 
     nodes: np.ndarray
     triangles: np.ndarray
+
+    @property
+    def dim(self) -> int:
+        """The dimension of the nodes' space."""
+        return int(self.nodes.shape[1])
+
+    @property
+    def simplices(self) -> np.ndarray:
+        """The elements (m, dim + 1), by the name that holds in every dimension."""
+        return self.triangles
 
     @property
     def n_nodes(self) -> int:

@@ -14,11 +14,12 @@ import numpy as np
 
 from .cables import CableSet
 from ..errors import SceneError
-from .fibers import FiberGraph, build_lattice
-from .geometry import Walls, signed_area
-from .mesh import Embedding, Mesh, read_mesh, refine, triangulate_polygon
+from .dimension import Dimension, dimension_of
+from .fibers import FiberGraph
+from .level import level_scale
+from .mesh import Embedding, Mesh
 from .scene import Scene
-from .size import check_size
+from .walls import Walls
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,13 +58,21 @@ class Problem:
         return CableSet.fibers(self.fibers.embedding, self.fibers.edges, self.fibers.a0,
                                self.scene.fibers.stiffness)
 
+    @property
+    def dim(self) -> int:
+        """The body's dimension: positions are (n, dim) arrays."""
+        return self.mesh.dim
+
+    @cached_property
+    def dimension(self) -> Dimension:
+        """What depends on the dimension (:func:`~.dimension.dimension_of`)."""
+        return dimension_of(self.scene)
+
     @cached_property
     def walls(self) -> Walls:
-        """The body's outline and holes (from the scene, or the mesh's triangles)."""
-        body = self.scene.body
-        if body.outline is not None:
-            return Walls.from_outline(body.outline, body.holes)
-        return Walls.from_triangles(self.mesh.nodes[self.mesh.triangles])
+        """The body's walls (:class:`~.walls.Walls`): in 2D its outline and holes (from
+        the scene, or the mesh's triangles)."""
+        return self.dimension.walls(self.scene, self.mesh)
 
     def coarser_meshes(self) -> list[Mesh]:
         """The body meshed at every other coarser level, ``level - 2``, ``level - 4``,
@@ -75,7 +84,7 @@ class Problem:
 
     @cached_property
     def _coarser(self) -> tuple[Mesh, ...]:
-        return tuple(_mesh_for_level(self.scene, lc) for lc in range(self.level - 2, 0, -2))
+        return tuple(self.dimension.mesh(self.scene, lc) for lc in range(self.level - 2, 0, -2))
 
     @property
     def n_poses(self) -> int:
@@ -125,49 +134,7 @@ class Problem:
 
     def counts(self) -> dict:
         return {"nodes": self.mesh.n_nodes, "triangles": self.mesh.n_triangles,
-                "fibers": self.fibers.n_fibers, "dofs": int(2 * (~self.fixed).sum())}
-
-
-@dataclass(frozen=True)
-class LevelScale:
-    """How resolution ``level`` (1, 2, ...) scales the scene's sizes: each level
-    halves the largest triangle area and divides the fiber spacing (a length) by
-    sqrt(2). ``length`` and ``area`` are the divisors of a level-1 length and area."""
-
-    level: int
-
-    @property
-    def length(self) -> float:
-        """sqrt(2) ** (level - 1): a level-1 length over this level's."""
-        return np.sqrt(2.0) ** (self.level - 1)
-
-    @property
-    def area(self) -> int:
-        """2 ** (level - 1): a level-1 area over this level's."""
-        return 2 ** (self.level - 1)
-
-
-def level_scale(level: int) -> LevelScale:
-    """The one place a level's sizes are derived from level 1's (:class:`LevelScale`)."""
-    return LevelScale(int(level))
-
-
-def _mesh_for_level(scene: Scene, level: int) -> Mesh:
-    """The body meshed at ``level``, once :func:`~tendon_taichi.body.size.check_size` allows it."""
-    body = scene.body
-    scale = level_scale(level)
-    spacing = scene.fibers.spacing / scale.length
-    if body.mesh_file is None:
-        area = abs(signed_area(body.outline)) - sum(abs(signed_area(h)) for h in body.holes)
-        check_size(scene.name, level, area, body.max_triangle_area / scale.area, spacing)
-        return triangulate_polygon(body.outline, body.holes, body.max_triangle_area / scale.area)
-    mesh = read_mesh(body.mesh_file)
-    base = body.max_triangle_area or float(np.abs(mesh.areas).max())
-    area = base / scale.area
-    check_size(scene.name, level, float(np.abs(mesh.areas).sum()), area, spacing)
-    if level > 1 or np.abs(mesh.areas).max() > area * (1 + 1e-9):
-        mesh = refine(mesh, area)
-    return mesh
+                "fibers": self.fibers.n_fibers, "dofs": int(self.dim * (~self.fixed).sum())}
 
 
 def build_problem(scene: Scene, level: int = 1) -> Problem:
@@ -175,7 +142,8 @@ def build_problem(scene: Scene, level: int = 1) -> Problem:
     scaled by :func:`level_scale`."""
     if not isinstance(level, (int, np.integer)) or level < 1:
         raise SceneError(f"the level must be an integer >= 1 (got {level!r})")
-    mesh = _mesh_for_level(scene, int(level))
+    dimension = dimension_of(scene)
+    mesh = dimension.mesh(scene, int(level))
     L = mesh.size
     tol = 1e-9 * L
     fixed = np.zeros(mesh.n_nodes, dtype=bool)
@@ -187,7 +155,7 @@ def build_problem(scene: Scene, level: int = 1) -> Problem:
     if fixed.all():
         raise SceneError(f"{scene.origin}: every mesh node lies in a [[fixed]] box: nothing can move")
     spacing = scene.fibers.spacing / level_scale(level).length
-    fibers = build_lattice(mesh, spacing, tol)
+    fibers = dimension.lattice(mesh, spacing, tol)
     if fibers.n_fibers == 0:
         raise SceneError(f"{scene.origin}: no fiber fits inside the body at spacing {spacing:g} m")
     points = np.array([t.point for t in scene.targets], dtype=float)
@@ -195,7 +163,7 @@ def build_problem(scene: Scene, level: int = 1) -> Problem:
     outside = np.flatnonzero(dist > tol)
     if len(outside):
         i = int(outside[0])
-        x, y = points[i]
-        raise SceneError(f"{scene.origin}: {scene.target_label(i)}.point [{x:g}, {y:g}] lies outside the body")
+        where = ", ".join(f"{c:g}" for c in points[i])
+        raise SceneError(f"{scene.origin}: {scene.target_label(i)}.point [{where}] lies outside the body")
     goals = np.array([t.goal for t in scene.targets], dtype=float)
     return Problem(scene, int(level), mesh, fixed, fibers, target, goals)

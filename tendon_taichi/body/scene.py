@@ -82,6 +82,12 @@ class Body:
     material: Material
     max_triangle_area: float | None  # m^2 at level 1
 
+    @property
+    def dim(self) -> int:
+        """The body's dimension: its outline's width (a mesh file is read as a 2D
+        triangle mesh)."""
+        return 2 if self.outline is None else int(np.shape(self.outline)[1])
+
 
 @dataclass(frozen=True)
 class FiberSettings:

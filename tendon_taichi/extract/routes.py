@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..body.geometry import Walls
+from ..body.walls import Walls
 from ..body.spline import basis
 from .protocol import Tendon
 

@@ -22,7 +22,8 @@ from ..body.cables import CableSet
 from ..body.mesh import Mesh
 from ..body.scene import Material
 from ..probes import probe
-from . import forces, runtime
+from . import runtime
+from .elements import element_kernels
 from .buffers import k_copy_nodes, k_read, k_read_int, k_read_ranges, k_write, k_write_int, k_write_ranges
 from .capstan import Capstan, FrictionJacobian, PointMap
 from .layout import Scalar, Slot, allocate, csr
@@ -85,6 +86,8 @@ class Model:
         self.n, self.m = mesh.n_nodes, mesh.n_triangles
         self.S, self.C, self.P = cables.n_segments, cables.n_cables, len(cables.points)
         self.single = cables.single_segment
+        #: the element kernels of the mesh's dimension (:mod:`.elements`)
+        self.kernels = element_kernels(mesh.dim)
         if parallel is None:
             threshold = runtime.parallel_threshold()
             parallel = (not runtime.is_cpu()) or (threshold is not None and self.m + self.S >= threshold)
@@ -309,7 +312,7 @@ class Model:
     def energy_and_min_det(self, trial: bool = False) -> tuple[float, float]:
         """E_tot (J) and the smallest det F at the positions (``trial``: at the line
         search's trial positions)."""
-        E, jmin = forces.k_energy(self.fb, self.ib, Slot.XT if trial else Slot.X, self.serial)
+        E, jmin = self.kernels.k_energy(self.fb, self.ib, Slot.XT if trial else Slot.X, self.serial)
         return float(E), float(jmin)
 
     def energy(self, x: np.ndarray | None = None) -> float:
@@ -322,7 +325,7 @@ class Model:
     def gradient_norm2(self) -> float:
         """Computes the gradient G at the positions (kept on the host as
         :attr:`last_gradient`); returns |G|^2 over the free DOFs."""
-        return float(forces.k_gradient(self.fb, self.ib, self.last_gradient, self.serial))
+        return float(self.kernels.k_gradient(self.fb, self.ib, self.last_gradient, self.serial))
 
     def gradient(self, x: np.ndarray | None = None) -> np.ndarray:
         """dE_tot/dx (n, 2), N, at x (default: current positions), all nodes; a given
@@ -336,7 +339,7 @@ class Model:
     def prepare_hessian(self, project: bool = False, jacobi: bool = True) -> None:
         """Element tangents (exact or PSD-projected), cable stiffnesses and (``jacobi``)
         the block-Jacobi preconditioner at the current x."""
-        forces.k_hessian(self.fb, self.ib, 1 if project else 0, bool(jacobi), self.serial)
+        self.kernels.k_hessian(self.fb, self.ib, 1 if project else 0, bool(jacobi), self.serial)
 
     def hessian_product(self, v: np.ndarray, project: bool = False,
                         prepare: bool = True) -> np.ndarray:
@@ -344,14 +347,14 @@ class Model:
         if prepare:
             self.prepare_hessian(project)
         self.write("VIN", np.asarray(v, dtype=np.float64).reshape(self.n, 2))
-        forces.k_hessian_product(self.fb, self.ib, self.serial)
+        self.kernels.k_hessian_product(self.fb, self.ib, self.serial)
         return self.node_vectors("VOUT")
 
     def cable_state(self) -> dict[str, np.ndarray]:
         """Per cable at the current x: (weighted) length ``L`` (m), rest length ``a``
         (m), strain ``e``, tension ``tau`` (N, at the pull end), ``kc`` = dtau/dL
         (N/m), ``tau_ac`` = dtau/dac (N/m), contraction ``ac`` (m)."""
-        forces.k_update_cables(self.fb, self.ib, self.serial)
+        self.kernels.k_update_cables(self.fb, self.ib, self.serial)
         C = self.C
         L, ac, tau, kc, tau_ac, rho = self.read_many([("L", C), ("AC", C), ("TAU", C), ("KC", C),
                                                       ("TAU_AC", C), ("RHO", C)])
@@ -377,7 +380,7 @@ class Model:
 
     def segment_tensions(self) -> np.ndarray:
         """Tension (S,) N of every segment at the current x: tau w_s."""
-        forces.k_update_cables(self.fb, self.ib, self.serial)
+        self.kernels.k_update_cables(self.fb, self.ib, self.serial)
         tau, w = self.read_many([("TAU", self.C), ("SEG_WT", self.S)])
         return tau[np.repeat(np.arange(self.C), np.diff(self.cables.start))] * w
 
@@ -393,7 +396,7 @@ class Model:
 
     def tensions(self) -> np.ndarray:
         """Cable tensions tau (C,), N, at the current x."""
-        forces.k_update_cables(self.fb, self.ib, self.serial)
+        self.kernels.k_update_cables(self.fb, self.ib, self.serial)
         return self.read("TAU", self.C)
 
     def tensions_at(self, ac: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -407,13 +410,13 @@ class Model:
     def length_jacobian_product(self, w: np.ndarray) -> np.ndarray:
         """sum_c w_c dL_c/dx, (n, 2), for w (C,)."""
         self.write("CCOEF", np.asarray(w, dtype=np.float64).reshape(self.C))
-        forces.k_cables_to_nodes(self.fb, self.ib, self.serial)
+        self.kernels.k_cables_to_nodes(self.fb, self.ib, self.serial)
         return self.node_vectors("VOUT")
 
     def length_jacobian_transpose_product(self, v: np.ndarray) -> np.ndarray:
         """dL_c/dx . v, (C,), for v (n, 2)."""
         self.write("VIN", np.asarray(v, dtype=np.float64).reshape(self.n, 2))
-        forces.k_nodes_to_cables(self.fb, self.ib, self.serial)
+        self.kernels.k_nodes_to_cables(self.fb, self.ib, self.serial)
         return self.read("CW", self.C)
 
     def mixed_product(self, w: np.ndarray) -> np.ndarray:
@@ -429,9 +432,9 @@ class Model:
     # ------------------------------------------------------------ what the direct backend assembles
     def hessian_entries(self) -> np.ndarray:
         """Element and segment Hessian blocks as last prepared, (36 m + 144 S,):
-        see :func:`~tendon_taichi.physics.forces.k_hessian_entries`."""
+        see :func:`~tendon_taichi.physics.self.kernels.k_hessian_entries`."""
         out = np.empty(36 * self.m + 144 * self.S)
-        forces.k_hessian_entries(self.fb, self.ib, out, self.serial)
+        self.kernels.k_hessian_entries(self.fb, self.ib, out, self.serial)
         return out
 
     @probe("assembly")
@@ -439,7 +442,7 @@ class Model:
         """The :meth:`hessian_entries` summed into ``bins`` bins, entry k into bin
         ``scatter[k]`` (int32, (36 m + 144 S,), each < ``bins``): what
         ``np.bincount(scatter, weights=self.hessian_entries(), minlength=bins)`` gives,
-        to the bit, (bins,); see :func:`~tendon_taichi.physics.forces.k_hessian_sums`.
+        to the bit, (bins,); see :func:`~tendon_taichi.physics.self.kernels.k_hessian_sums`.
         ``scatter`` is checked at its first call: change none in place after it."""
         if self._sums_checked[0] is not scatter or self._sums_checked[1] != bins:
             # the kernel does not check its indices: each array once (the direct backend
@@ -450,7 +453,7 @@ class Model:
                 raise ValueError(f"hessian_sums: a bin outside 0..{bins - 1}")
             self._sums_checked = (scatter, bins)
         out = np.empty(bins)
-        forces.k_hessian_sums(self.fb, self.ib, np.ascontiguousarray(scatter), out)
+        self.kernels.k_hessian_sums(self.fb, self.ib, np.ascontiguousarray(scatter), out)
         return out
 
     def hessian_data(self) -> dict[str, np.ndarray]:

@@ -1,0 +1,63 @@
+"""The one place that decides a body's dimension, and what depends on it in this
+layer: a :class:`Dimension` gives the body's mesh at a level (simplices of
+``dim + 1`` nodes: triangles in 2D), its walls (the :class:`~.walls.Walls`
+protocol) and its fiber lattice. The layers above choose their own
+dimension-dependent parts by ``problem.dim`` in the same way (the element
+kernels: :mod:`tendon_taichi.physics.elements`; the fabrication export and the
+design's picture: :mod:`tendon_taichi.io.outputs`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from ..errors import SceneError
+from .fibers import FiberGraph, build_lattice
+from .mesh import Mesh
+from .plane import plane_mesh, plane_walls
+from .scene import Scene
+from .walls import Walls
+
+
+@dataclass(frozen=True)
+class Dimension:
+    """What a body of dimension ``dim`` is built from.
+
+    Args:
+        dim: the dimension; positions are (n, dim) arrays, m.
+        simplex: the mesh's element ("triangle"), of ``dim + 1`` nodes.
+        mesh: ``mesh(scene, level)``, the body meshed at a resolution level.
+        walls: ``walls(scene, mesh)``, the body's boundary for route clearance.
+        lattice: ``lattice(mesh, spacing, tol)``, the fiber lattice of ``spacing``
+            (m) clipped to the body, ``tol`` (m) its closed-inside tolerance.
+    """
+
+    dim: int
+    simplex: str
+    mesh: Callable[[Scene, int], Mesh]
+    walls: Callable[[Scene, Mesh], Walls]
+    lattice: Callable[[Mesh, float, float], FiberGraph]
+
+
+#: 2D bodies: triangles, the polygon walls, the 8-neighbour lattice
+PLANE = Dimension(2, "triangle", plane_mesh, plane_walls, build_lattice)
+
+#: the dimensions bodies may have, by ``dim``
+DIMENSIONS: dict[int, Dimension] = {PLANE.dim: PLANE}
+
+
+def register_dimension(dimension: Dimension) -> Dimension | None:
+    """Make ``dimension`` the one of its ``dim``; returns the one it replaces, if any."""
+    before = DIMENSIONS.get(dimension.dim)
+    DIMENSIONS[dimension.dim] = dimension
+    return before
+
+
+def dimension_of(scene: Scene) -> Dimension:
+    """The :class:`Dimension` of ``scene``'s body (:attr:`~.scene.Body.dim`); one
+    clear line where none is registered for it."""
+    dim = scene.body.dim
+    if dim not in DIMENSIONS:
+        known = ", ".join(f"{d}D" for d in sorted(DIMENSIONS))
+        raise SceneError(f"{scene.origin}: a {dim}D body cannot be built (bodies may be {known})")
+    return DIMENSIONS[dim]
