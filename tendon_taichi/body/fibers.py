@@ -35,7 +35,7 @@ class FiberPairs:
 
 @dataclass(frozen=True, eq=False)
 class FiberGraph:
-    """Fiber nodes (rest positions ``nodes`` (k, 2), m, and their ``embedding``) and
+    """Fiber nodes (rest positions ``nodes`` (k, dim), m, and their ``embedding``) and
     fibers ``edges`` (f, 2) as pairs of fiber-node ids; ``spacing`` in m."""
 
     nodes: np.ndarray

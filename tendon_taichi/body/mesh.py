@@ -1,7 +1,8 @@
-"""Triangle meshes of the body: meshing with ``triangle``, import with meshio,
-and barycentric embedding of material points (``docs/method.md``).
+"""Meshes of the body: meshing with ``triangle``, import with meshio, and
+barycentric embedding of material points (``docs/method.md``).
 
-A :class:`Mesh` holds rest positions ``nodes`` (n, 2) in metres and
+A :class:`Mesh` holds rest positions ``nodes`` (n, dim) in metres and its
+simplices of ``dim + 1`` nodes; in 2D, the dimension built so far,
 counter-clockwise ``triangles`` (m, 3).
 """
 
@@ -30,8 +31,8 @@ class Embedding:
     bary: np.ndarray
 
     def positions(self, mesh_triangles: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Positions (k, 2) of the embedded points for node positions ``x`` (n, 2)."""
-        corners = x[mesh_triangles[self.tri]]  # (k, 3, 2)
+        """Positions (k, dim) of the embedded points for node positions ``x`` (n, dim)."""
+        corners = x[mesh_triangles[self.tri]]  # (k, dim + 1, dim)
         return np.einsum("kj,kjd->kd", self.bary, corners)
 
     def __len__(self) -> int:

@@ -25,7 +25,7 @@ from .walls import Walls
 @dataclass(frozen=True, eq=False)
 class Problem:
     """A scene at resolution ``level``: ``mesh``, ``fixed`` (bool per node),
-    ``fibers``, and targets (``target`` embedding, ``target_goal`` (t, 2), m) -
+    ``fibers``, and targets (``target`` embedding, ``target_goal`` (t, dim), m) -
     those of every pose, pose after pose (:attr:`target_pose`); :meth:`pose`
     gives one pose's problem."""
 
@@ -120,7 +120,7 @@ class Problem:
         return self if scene is self.scene else replace(self, scene=scene)
 
     def embed_waypoints(self, nodes: np.ndarray, waypoints: np.ndarray, hint: np.ndarray | None = None) -> Embedding:
-        """A tendon's waypoints (k, 2) embedded in the rest mesh: exactly as its fiber
+        """A tendon's waypoints (k, dim) embedded in the rest mesh: exactly as its fiber
         nodes are when it runs through them (``nodes`` (k,)), else located (trying
         the triangles ``hint`` (k,) first)."""
         if len(nodes) == len(waypoints):
@@ -129,7 +129,7 @@ class Problem:
         return self.mesh.locate(waypoints, hint=hint)[0]
 
     def target_positions(self, x: np.ndarray) -> np.ndarray:
-        """Where the target points are (t, 2) for node positions ``x`` (n, 2)."""
+        """Where the target points are (t, dim) for node positions ``x`` (n, dim)."""
         return self.target.positions(self.mesh.triangles, x)
 
     def counts(self) -> dict:

@@ -39,7 +39,7 @@ class PluginError(TendonError):
 @dataclass
 class IdealizedState:
     """What an extractor works from: fiber tensions ``tau`` (f,) N and contractions
-    ``ac`` (f,) m of one stage, the equilibrium ``x`` (n, 2) m, and the tension
+    ``ac`` (f,) m of one stage, the equilibrium ``x`` (n, dim) m, and the tension
     above which a fiber counts as active, ``active_threshold`` (N). With several
     target poses, ``tau`` is the union tension sqrt(sum_p tau_p^2), ``ac`` the
     largest contraction over the poses, ``x`` the first pose's equilibrium, and
@@ -62,7 +62,7 @@ class IdealizedState:
 @dataclass
 class Tendon:
     """A tendon: a path through fiber nodes ``nodes`` (k,) along fibers ``fibers``
-    (k-1,), rest ``waypoints`` (k, 2) m, anchored at the first waypoint and pulled
+    (k-1,), rest ``waypoints`` (k, dim) m, anchored at the first waypoint and pulled
     at the last; ``tension`` and ``tension_std`` (N) of its active source fibers.
     ``contraction`` (m) is set when the realizable robot is solved. A smooth
     route off the lattice (what consolidation makes of an extractor's tendons)
@@ -110,7 +110,7 @@ class Tendon:
 
 
 def turn_angles(points: np.ndarray) -> np.ndarray:
-    """Turn angles at the interior points of a polyline (k, 2), radians in [0, pi]."""
+    """Turn angles at the interior points of a polyline (k, dim), radians in [0, pi]."""
     d = np.diff(np.asarray(points, dtype=float), axis=0)
     if len(d) < 2:
         return np.zeros(0)

@@ -25,7 +25,7 @@ from .setting import Setting
 @dataclass
 class TermValue:
     """A term's value and partial derivatives (None where it does not depend):
-    ``dx`` (n, 2) w.r.t. node positions, ``dtau`` (C,), ``dac`` (C,) explicit."""
+    ``dx`` (n, dim) w.r.t. node positions, ``dtau`` (C,), ``dac`` (C,) explicit."""
 
     value: float
     dx: np.ndarray | None = None
@@ -35,7 +35,7 @@ class TermValue:
 
 @dataclass
 class State:
-    """An equilibrium to evaluate terms at: positions ``x`` (n, 2), contractions
+    """An equilibrium to evaluate terms at: positions ``x`` (n, dim), contractions
     ``ac`` (C,) m, tensions ``tau`` (C,) N, of pose number ``pose``."""
 
     x: np.ndarray

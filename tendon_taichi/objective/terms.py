@@ -87,7 +87,7 @@ class PoseTerm(Term):
 
     def evaluate(self, state: State) -> TermValue:
         p = self.poses[state.pose]
-        diff = p.target_positions(state.x) - p.target_goal  # (t, 2)
+        diff = p.target_positions(state.x) - p.target_goal  # (t, dim)
         dx = np.zeros_like(state.x)
         corners = p.mesh.triangles[p.target.tri]  # (t, 3)
         for j in range(3):

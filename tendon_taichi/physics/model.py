@@ -33,7 +33,7 @@ from .runtime import ti
 @dataclass(frozen=True)
 class _BodyArrays:
     """What a model uploads of its mesh and material alone, the same for every model of
-    them (the many tendon robots of one design): node positions ``X`` (n, 2) m,
+    them (the many tendon robots of one design): node positions ``X`` (n, dim) m,
     triangles ``T`` (m, 3), the node -> element-corner incidences (``ne_start``, ``ne``:
     :func:`~.layout.csr`), the inverse rest shape matrices ``Bm`` (m, 2, 2) 1/m, the
     volumes ``vol`` (m,) m^3 and the lumped node masses ``mass`` (n,) kg."""
@@ -270,7 +270,7 @@ class Model:
         return int(k_read_int(self.ib, self.offset[name] + at))
 
     def node_vectors(self, name: str) -> np.ndarray:
-        """The per-node vectors of array ``name`` (n, 2)."""
+        """The per-node vectors of array ``name`` (n, dim)."""
         return self.read(name, 2 * self.n).reshape(self.n, 2)
 
     # ------------------------------------------------------------ state
@@ -280,11 +280,11 @@ class Model:
         return int(2 * (~self.fixed).sum())
 
     def positions(self) -> np.ndarray:
-        """Current node positions x (n, 2), m."""
+        """Current node positions x (n, dim), m."""
         return self.node_vectors("X")
 
     def set_positions(self, x: np.ndarray) -> None:
-        """Set node positions (n, 2); clamped nodes are reset to their rest position."""
+        """Set node positions (n, dim); clamped nodes are reset to their rest position."""
         x = np.array(x, dtype=np.float64).reshape(self.n, 2)
         x[self.fixed] = self.mesh.nodes[self.fixed]
         self.write("X", x)
@@ -328,7 +328,7 @@ class Model:
         return float(self.kernels.k_gradient(self.fb, self.ib, self.last_gradient, self.serial))
 
     def gradient(self, x: np.ndarray | None = None) -> np.ndarray:
-        """dE_tot/dx (n, 2), N, at x (default: current positions), all nodes; a given
+        """dE_tot/dx (n, dim), N, at x (default: current positions), all nodes; a given
         x becomes the current positions."""
         if x is not None:
             self.set_free_positions(x)
@@ -343,7 +343,7 @@ class Model:
 
     def hessian_product(self, v: np.ndarray, project: bool = False,
                         prepare: bool = True) -> np.ndarray:
-        """H v (n, 2) for v (n, 2): the exact (or projected) Hessian of E_tot at x."""
+        """H v (n, dim) for v (n, dim): the exact (or projected) Hessian of E_tot at x."""
         if prepare:
             self.prepare_hessian(project)
         self.write("VIN", np.asarray(v, dtype=np.float64).reshape(self.n, 2))
@@ -401,31 +401,31 @@ class Model:
 
     def tensions_at(self, ac: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Cable tensions tau (C,), N, at contractions ``ac`` (C,) m and positions ``x``
-        (n, 2) m, which become the model's state (no solve: ``x`` is an equilibrium
+        (n, dim) m, which become the model's state (no solve: ``x`` is an equilibrium
         found before)."""
         self.set_contraction(ac)
         self.set_positions(x)
         return self.tensions()
 
     def length_jacobian_product(self, w: np.ndarray) -> np.ndarray:
-        """sum_c w_c dL_c/dx, (n, 2), for w (C,)."""
+        """sum_c w_c dL_c/dx, (n, dim), for w (C,)."""
         self.write("CCOEF", np.asarray(w, dtype=np.float64).reshape(self.C))
         self.kernels.k_cables_to_nodes(self.fb, self.ib, self.serial)
         return self.node_vectors("VOUT")
 
     def length_jacobian_transpose_product(self, v: np.ndarray) -> np.ndarray:
-        """dL_c/dx . v, (C,), for v (n, 2)."""
+        """dL_c/dx . v, (C,), for v (n, dim)."""
         self.write("VIN", np.asarray(v, dtype=np.float64).reshape(self.n, 2))
         self.kernels.k_nodes_to_cables(self.fb, self.ib, self.serial)
         return self.read("CW", self.C)
 
     def mixed_product(self, w: np.ndarray) -> np.ndarray:
-        """(d2E/dx dac) w, (n, 2), for w (C,) in m."""
+        """(d2E/dx dac) w, (n, dim), for w (C,) in m."""
         tau_ac = self.cable_state()["tau_ac"]
         return self.length_jacobian_product(tau_ac * np.asarray(w, dtype=np.float64))
 
     def mixed_transpose_product(self, v: np.ndarray) -> np.ndarray:
-        """(d2E/dx dac)^T v, (C,), for v (n, 2)."""
+        """(d2E/dx dac)^T v, (C,), for v (n, dim)."""
         tau_ac = self.cable_state()["tau_ac"]
         return tau_ac * self.length_jacobian_transpose_product(v)
 
