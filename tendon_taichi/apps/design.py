@@ -41,7 +41,7 @@ from ..io.recording import rewrite
 from ..physics import runtime
 from ..tasks.pool import Pool
 from .extract import Extraction, extract, frictionless_error, log_layout
-from .optimize import RunResult, optimize
+from .optimize import RunOptions, RunResult, optimize
 from .priors import PriorDesign, prior_layouts, read_prior, route_rows
 from .provenance import result_provenance
 
@@ -202,7 +202,8 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     with Pool(workers, start_worker, (here["threads"], here["arch"])) as pool, runtime.cores_shared(workers > 0):
         progress.message(f"design: optimizing {scene.name} at level {level}"
                          + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
-        run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
+        run = optimize(scene, level, solver, record=out / "run.rrd", progress=progress,
+                       options=RunOptions(export=out / "run.npz"))
         check_reach(run, budget)
         for w in run.warnings:  # now, not only with the design: the search may take long
             progress.message(f"design: warning: {w}")
