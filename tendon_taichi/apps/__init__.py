@@ -10,5 +10,5 @@ __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     ".optimize": ("RunResult", "RunOptions", "Interrupted", "optimize"),
     ".replay": ("replay",),
     ".extract": ("Extraction", "ExtractorResult", "extract"),
-    ".case": ("CaseResult", "run_case"),
+    ".case": ("CaseResult", "CaseSettings", "run_case"),
 })
