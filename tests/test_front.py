@@ -342,7 +342,7 @@ def test_a_route_cut_short_is_carried_on_along_its_tangent(searched):
     assert best.routes[0].waypoints[:, 0].min() < 0.025 - 0.5 * EXTEND * p.size  # the cut end carried on
     assert best.error < 0.5 * short.error and best.cost < short.cost
     front = Front(layouts={2: short}, routes=[arm, stem])
-    _extend(search, front, front.routes, p.size, OPTIONS, lambda text: None)
+    _extend(search, front, front.routes, p.size, OPTIONS)
     assert front.layouts[2].cost == best.cost and front.finished[2]
 
 
