@@ -33,8 +33,9 @@ TIE = 1e-7
 ROWS: list[dict] = []
 
 
-def _both(call, problem, tendons, state, settings, solver="auto", tensions=None, start=None, positions=None):
+def _both(call, context, tendons, tensions=None, start=None, positions=None):
     """``solve_realizable`` (``call``, its probe), with the solve done by both solvers on the side."""
+    problem, state, settings, solver = context.problem, context.state, context.settings, context.solver
     if tendons:
         r0 = realizable.warm_ratios(problem, tendons, state, tensions) if start is None else np.asarray(start, float)
         warm = None if positions is None else [positions]
@@ -48,7 +49,7 @@ def _both(call, problem, tendons, state, settings, solver="auto", tensions=None,
             except ConvergenceError:
                 row[name] = (np.inf, 0, time.perf_counter() - t0)
         ROWS.append(row)
-    return call(problem, tendons, state, settings, solver, tensions, start, positions)
+    return call(context, tendons, tensions, start, positions)
 
 
 def report() -> None:

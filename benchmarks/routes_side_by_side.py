@@ -61,10 +61,11 @@ def penalty_lbfgsb(problem, routes, ratios, settings, rs, solver="auto", positio
     return best["f"], obj.evaluations, int(res.nit)
 
 
-def _both(call, problem, routes, ratios, settings, rs, solver="auto", positions=None, on_iteration=None):
+def _both(call, context, routes, ratios, rs, positions=None, on_iteration=None):
     """``optimize_routes`` (``call``, its probe), with L-BFGS-B and the penalty run on the side."""
     t0 = time.perf_counter()
-    f_old, ev_old, it_old = penalty_lbfgsb(problem, routes, ratios, settings, rs, solver, positions)
+    f_old, ev_old, it_old = penalty_lbfgsb(context.problem, routes, ratios, context.settings, rs, context.solver,
+                                           positions)
     t1 = time.perf_counter()
     it = {"k": 0}
 
@@ -73,7 +74,7 @@ def _both(call, problem, routes, ratios, settings, rs, solver="auto", positions=
         if on_iteration is not None:
             on_iteration(k, objective)
 
-    res = call(problem, routes, ratios, settings, rs, solver, positions, count)
+    res = call(context, routes, ratios, rs, positions, count)
     ROWS.append({"old": (f_old, ev_old, t1 - t0, it_old),
                  "new": (res.objective, res.evaluations, time.perf_counter() - t1, it["k"])})
     return res

@@ -32,10 +32,8 @@ class TableReader:
         return self.table[key]
 
     def number(self, key: str, default: float | None = None, *, gt=None, ge=None, lt=None,
-               le=None, required: bool = False) -> float | None:
+               le=None) -> float | None:
         if key not in self.table:
-            if required:
-                self.fail(key, "is required")
             return default
         v = self.raw(key)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):

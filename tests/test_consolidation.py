@@ -14,6 +14,7 @@ import pytest
 
 import tendon_taichi.extract.consolidation as cons
 from tendon_taichi.extract.consolidation import consolidate
+from tendon_taichi.extract.context import Context
 from tendon_taichi.extract.protocol import turn_angles
 from tendon_taichi.extract.realizable import predict_realizable, solve_realizable_poses, target_jacobian, tendon_cables
 from tendon_taichi.extract.settings import SCREEN, ConsolidationSettings
@@ -60,8 +61,8 @@ def _tendons(p, paths, state):
 
 
 def _run(p, tendons, state, tol, budget=0.0, gap=0.1, refine=0, screen=SCREEN):
-    return consolidate(p, tendons, state, p.scene.optimize, ConsolidationSettings(tol, gap, budget, refine, screen),
-                       "direct")
+    return consolidate(Context(p, state, p.scene.optimize, "direct"), tendons,
+                       ConsolidationSettings(tol, gap, budget, refine, screen))
 
 
 def _actions(out):
@@ -120,8 +121,8 @@ def test_the_budget_buys_fewer_tendons_within_it(straight):
     st = _state(p, eq, paths)
     tendons = _tendons(p, paths, st)
     routes, tensions = cons.extracted_routes(p, tendons, st, 0.02 * p.size)
-    search = cons._Search(p, st, p.scene.optimize, "direct", ConsolidationSettings(), cons.route_settings(
-        p, ConsolidationSettings()), "", None)
+    search = cons._Search(Context(p, st, p.scene.optimize, "direct"), ConsolidationSettings(),
+                          cons.route_settings(p, ConsolidationSettings()), "")
     start = search.start_ratios(routes, tensions)
     alone = [search.solve([r], start[:, [i]]).error for i, r in enumerate(routes)]
     best = int(np.argmin(alone))
@@ -146,11 +147,11 @@ def test_a_candidate_that_cannot_be_solved_is_skipped(straight, monkeypatch):
     pieces = _tendons(p, [paths[1], f[:3], f[5:]], st)
     real_solve = cons.solve_realizable_poses
 
-    def solve(problem, tendons, *args):
+    def solve(context, tendons, *args):
         if len(tendons) < 3 and not any(t.control is not None and np.ptp(t.waypoints[:, 0]) >= 0.025
                                         and abs(t.waypoints[:, 1] - 0.075).max() < 0.01 for t in tendons):
             raise ConvergenceError("equilibrium did not converge (test)")
-        return real_solve(problem, tendons, *args)
+        return real_solve(context, tendons, *args)
 
     monkeypatch.setattr(cons, "solve_realizable_poses", solve)
     out = _run(p, pieces, st, tol=1e-3, screen=0)
@@ -235,7 +236,7 @@ def test_gauss_newton_steps_converge_to_a_reachable_pose(planted):
     ratios = np.full((1, 2), 0.05)
     x, error = at(ratios)
     for gain in (10.0, 100.0):
-        predicted, ratios = predict_realizable(p, tendons, p.scene.optimize, ratios, [x], "direct")
+        predicted, ratios = predict_realizable(Context(p, None, p.scene.optimize, "direct"), tendons, ratios, [x])
         x, now = at(ratios)
         assert now <= error / gain and abs(predicted - now) <= 0.05 * error, (gain, error, now, predicted)
         error = now

@@ -12,6 +12,7 @@ from conftest import PLANTED, lattice_path
 from tendon_taichi import Model, NewtonSolver, build_problem, load_scene, parse_scene
 from tendon_taichi.extraction import (FiberView, IdealizedState, MetricSettings, PluginError, Tendon,
                                       available_extractors, load_extractor, tendon_metrics)
+from tendon_taichi.extract.context import Context
 from tendon_taichi.extract.realizable import solve_realizable, tendon_cables
 
 BUILTIN = ["network_discovery", "path_cover", "strands"]
@@ -231,7 +232,7 @@ def test_noisy_planted_tendons_with_path_cover(planted):
     planted_xy = [np.array(path) for path in PLANTED]
     for t in ts:
         assert min(_hausdorff(t.waypoints, q) for q in planted_xy) <= p.fibers.spacing + 1e-12
-    real = solve_realizable(p, ts, st, p.scene.optimize, "direct")
+    real = solve_realizable(Context(p, st, p.scene.optimize, "direct"), ts)
     assert real.pose_error_rel <= 0.01, real.pose_error_rel
     assert np.all(real.contraction > 0)
 
@@ -239,7 +240,7 @@ def test_noisy_planted_tendons_with_path_cover(planted):
 def test_realizable_robot_without_tendons_stays_at_rest(planted):
     p, _, eq = planted
     st = IdealizedState(np.zeros(p.fibers.n_fibers), np.zeros(p.fibers.n_fibers), eq.x, 0.01)
-    real = solve_realizable(p, [], st, p.scene.optimize, "direct")
+    real = solve_realizable(Context(p, st, p.scene.optimize, "direct"), [])
     assert np.allclose(real.x, p.mesh.nodes)
     rest_error = np.sqrt(((p.target_positions(p.mesh.nodes) - p.target_goal) ** 2).sum())
     assert real.pose_error == pytest.approx(rest_error) and real.pose_error_rel > 0.01

@@ -10,6 +10,7 @@ from test_consolidation import _state, _tendons, straight  # noqa: F401  (the fi
 
 from tendon_taichi.apps.design import front_rows, recommend
 from tendon_taichi.extract.consolidation import consolidate
+from tendon_taichi.extract.context import Context
 from tendon_taichi.extract.converge import converge_front, converged_error, pose_only_state
 from tendon_taichi.extract.front import distinct_routes, same_route, search_front
 from tendon_taichi.extract.settings import ConsolidationSettings
@@ -29,8 +30,9 @@ def searched(straight):  # noqa: F811
     arm = list(paths[0])
     found = {"a": _tendons(p, [paths[0], paths[1], extra], st),
              "b": _tendons(p, [paths[1], arm[:3], arm[5:]], st)}
-    greedy = [consolidate(p, t, st, p.scene.optimize, OPTIONS, "direct", source=name) for name, t in found.items()]
-    front = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
+    greedy = [consolidate(Context(p, st, p.scene.optimize, "direct"), t, OPTIONS, source=name)
+              for name, t in found.items()]
+    front = search_front(Context(p, st, p.scene.optimize, "direct"), greedy, OPTIONS)
     return p, st, greedy, front
 
 
@@ -78,12 +80,12 @@ def test_on_a_finer_mesh_two_still_make_the_pose_and_the_front_stays_monotone(se
     p, st, _, front = searched
     fine = replace(build_problem(p.scene, 2), target_goal=p.target_goal)  # the planted goals, as on level 1
     assert fine.mesh.n_nodes > 1.5 * p.mesh.n_nodes
-    res = converge_front(front, p, st, fine, p.scene.optimize, OPTIONS, "direct")
+    res = converge_front(front, Context(p, st, p.scene.optimize, "direct"), fine, OPTIONS)
     assert sorted(res) == sorted(front.layouts) and all(r is not None for r in res.values())
     assert res[2].pose_error_rel < 0.005 < res[1].pose_error_rel
     errors = [res[k].pose_error_rel for k in sorted(res)]
     assert all(b <= a + 1e-6 for a, b in zip(errors, errors[1:])), errors
-    alone = converged_error(fine, front.layouts[2], pose_only_state(fine), p.scene.optimize, "direct")
+    alone = converged_error(Context(fine, pose_only_state(fine), p.scene.optimize, "direct"), front.layouts[2])
     assert alone.pose_error_rel == pytest.approx(res[2].pose_error_rel, rel=1e-9)  # the same solve
 
 
@@ -98,7 +100,7 @@ def test_one_tendon_is_searched_over_every_pooled_route_and_join(searched):
 
     p, st, _, front = searched
     wide = replace(OPTIONS, gap=max(OPTIONS.gap, JOIN_GAP))
-    search = _Search(p, st, p.scene.optimize, "direct", wide, route_settings(p, OPTIONS), "test", None)
+    search = _Search(Context(p, st, p.scene.optimize, "direct"), wide, route_settings(p, OPTIONS), "test")
     n = len(front.routes)
     ones = pooled_candidates(search, front.routes, 1)
     assert [c.action for c in ones[:n]] == ["route"] * n and [c.ids for c in ones[:n]] == [(i,) for i in range(n)]
@@ -116,7 +118,7 @@ def test_the_exhaustive_search_adds_to_the_beam_and_takes_nothing_from_it(search
 
     p, st, greedy, front = searched
     monkeypatch.setattr(front_module, "EXHAUSTIVE", 0)
-    beam_only = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
+    beam_only = search_front(Context(p, st, p.scene.optimize, "direct"), greedy, OPTIONS)
     assert front.layouts[1].cost <= beam_only.layouts[1].cost * (1 + 1e-9)
     assert front.screened > beam_only.screened
 
@@ -133,7 +135,7 @@ def test_a_route_added_to_a_layout_starts_barely_taut(searched):
     p, st, _, front = searched
     below = front.layouts[1]
     route = next(r for r in front.routes if not any(same_route(r, q, p.size) for q in below.routes))
-    search = _Search(p, st, p.scene.optimize, "direct", OPTIONS, route_settings(p, OPTIONS), "test", None)
+    search = _Search(Context(p, st, p.scene.optimize, "direct"), OPTIONS, route_settings(p, OPTIONS), "test")
     ratio = _taut_ratios(search, route, below)
     assert ratio.shape == (1, 1)
     cables = tendon_cables(p, [route.tendon()])
@@ -159,7 +161,7 @@ def test_a_slack_route_is_found_and_the_robot_without_it_is_the_same(searched):
     from tendon_taichi.extract.front import PRECISION, _without_slack, slack_routes
 
     p, st, _, _ = searched
-    search = _Search(p, st, p.scene.optimize, "direct", OPTIONS, route_settings(p, OPTIONS), "test", None)
+    search = _Search(Context(p, st, p.scene.optimize, "direct"), OPTIONS, route_settings(p, OPTIONS), "test")
     planted, _ = extracted_routes(p, _planted_tendons(p, st), st, search.rs.clearance)
     three = _with_a_slack_route(p, st, search, planted)
     assert three.count == 3 and slack_routes(three) == [2]
@@ -194,7 +196,7 @@ def test_a_layout_with_a_slack_route_is_offered_at_its_working_count(searched, m
         return real(search, layout, rounds)
 
     monkeypatch.setattr(front_module, "_finished", finished)
-    front = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
+    front = search_front(Context(p, st, p.scene.optimize, "direct"), greedy, OPTIONS)
     assert front.layouts[3].count == 3 and front_module.slack_routes(front.layouts[3]) == [2]
     assert front.layouts[2].error < 1e-3 and front_module.slack_routes(front.layouts[2]) == []
     assert recommend(front_rows(front, None, 0.0, 30.0), 0.005)["count"] == 2
@@ -230,11 +232,11 @@ def test_the_descent_reduces_finished_layouts(searched, monkeypatch):
 
     monkeypatch.setattr(front_module, "_finished", finished)
     monkeypatch.setattr(front_module, "_extend", lambda *args: None)
-    front = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
+    front = search_front(Context(p, st, p.scene.optimize, "direct"), greedy, OPTIONS)
     assert front.layouts[2].error < 1e-3 and front.layouts[2].source != "test"
     assert recommend(front_rows(front, None, 0.0, 30.0), 0.005)["count"] == 2
     monkeypatch.setattr(front_module, "_descend", lambda *args: None)
-    poor = search_front(p, st, p.scene.optimize, greedy, OPTIONS, "direct")
+    poor = search_front(Context(p, st, p.scene.optimize, "direct"), greedy, OPTIONS)
     assert poor.layouts[2].source == "test" and poor.layouts[2].error > 0.005
 
 
@@ -250,7 +252,7 @@ def test_the_finer_mesh_chooses_among_each_counts_finished_layouts(searched):
     from tendon_taichi.extract.consolidation import _Search, route_settings
 
     p, st, _, searched_front = searched
-    search = _Search(p, st, p.scene.optimize, "direct", OPTIONS, route_settings(p, OPTIONS), "test", None)
+    search = _Search(Context(p, st, p.scene.optimize, "direct"), OPTIONS, route_settings(p, OPTIONS), "test")
     poor = replace(_with_a_slack_route(p, st, search, searched_front.layouts[1].routes), optimized=True, source="test")
     good = searched_front.layouts[2]
     fine = replace(build_problem(p.scene, 2), target_goal=p.target_goal)
@@ -262,16 +264,16 @@ def test_the_finer_mesh_chooses_among_each_counts_finished_layouts(searched):
         return front
 
     front = front_with([poor, good])
-    res = converge_front(front, p, st, fine, p.scene.optimize, OPTIONS, "direct")
+    res = converge_front(front, Context(p, st, p.scene.optimize, "direct"), fine, OPTIONS)
     assert front.layouts[2] is good and res[2].pose_error_rel < 1e-3
     fine_state = pose_only_state(fine)
     for k, members in front.finished.items():
         kept = search.cost(front.layouts[k].routes, res[k].pose_error_rel)
         for lay in members:
-            alone = converged_error(fine, lay, fine_state, p.scene.optimize, "direct")
+            alone = converged_error(Context(fine, fine_state, p.scene.optimize, "direct"), lay)
             assert kept <= search.cost(lay.routes, alone.pose_error_rel) * (1 + 1e-6) + 1e-12, (k, lay.source)
     stuck = front_with([poor])
-    res = converge_front(stuck, p, st, fine, p.scene.optimize, OPTIONS, "direct")
+    res = converge_front(stuck, Context(p, st, p.scene.optimize, "direct"), fine, OPTIONS)
     assert stuck.layouts[2] is poor and res[2].pose_error_rel > 0.005
 
 
@@ -293,24 +295,24 @@ def test_the_finer_mesh_optimizes_each_counts_routes_again(searched):
     fine = replace(build_problem(p.scene, 2), target_goal=p.target_goal)
     fine_state = pose_only_state(fine)
     options = replace(OPTIONS, refine=1)
-    search = _Search(p, st, p.scene.optimize, "direct", options, route_settings(p, options), "test", None)
-    before = {k: min(search.cost(lay.routes, converged_error(fine, lay, fine_state, p.scene.optimize,
-                                                             "direct").pose_error_rel)
+    search = _Search(Context(p, st, p.scene.optimize, "direct"), options, route_settings(p, options), "test")
+    there = Context(fine, fine_state, p.scene.optimize, "direct")
+    before = {k: min(search.cost(lay.routes, converged_error(there, lay).pose_error_rel)
                      for lay in [searched_front.layouts[k]] + searched_front.finished.get(k, []))
               for k in searched_front.layouts}
     front = copy.deepcopy(searched_front)
-    res = converge_front(front, p, st, fine, p.scene.optimize, options, "direct")
+    res = converge_front(front, Context(p, st, p.scene.optimize, "direct"), fine, options)
     assert 1 in front.refit and front.as_json()["refit"] == front.refit
     for k, lay in front.layouts.items():
         assert search.cost(lay.routes, res[k].pose_error_rel) <= before[k] * (1 + 1e-9), k
         assert lay.realizable.x.shape == (p.mesh.n_nodes, 2)  # the design mesh's robot ...
-        alone = converged_error(fine, lay, fine_state, p.scene.optimize, "direct", start=res[k].ratios)
+        alone = converged_error(there, lay, start=res[k].ratios)
         assert alone.pose_error_rel == pytest.approx(res[k].pose_error_rel, rel=1e-6, abs=1e-9)  # ... of these routes
     assert search.cost(front.layouts[1].routes, res[1].pose_error_rel) < 0.9 * before[1]
     errors = [res[k].pose_error_rel for k in sorted(res)]
     assert all(b <= a + 1e-6 for a, b in zip(errors, errors[1:])), errors
     off = copy.deepcopy(searched_front)
-    converge_front(off, p, st, fine, p.scene.optimize, OPTIONS, "direct")
+    converge_front(off, Context(p, st, p.scene.optimize, "direct"), fine, OPTIONS)
     assert off.refit == []
 
 
@@ -327,7 +329,7 @@ def test_a_route_cut_short_is_carried_on_along_its_tangent(searched):
     from tendon_taichi.extract.routes import extend_route, fit_route
 
     p, st, _, _ = searched
-    search = _Search(p, st, p.scene.optimize, "direct", OPTIONS, route_settings(p, OPTIONS), "test", None)
+    search = _Search(Context(p, st, p.scene.optimize, "direct"), OPTIONS, route_settings(p, OPTIONS), "test")
     arm = fit_route(np.array(LINES[0][:5]), p.size, 0.4, 0.0, "arm")  # x from 0.045 to 0.025, at y = 0.075
     stem = fit_route(np.array(LINES[1]), p.size, 0.4, 0.0, "stem")
     longer = extend_route(arm, 1, EXTEND * p.size, p.size)
@@ -340,7 +342,7 @@ def test_a_route_cut_short_is_carried_on_along_its_tangent(searched):
     assert best.routes[0].waypoints[:, 0].min() < 0.025 - 0.5 * EXTEND * p.size  # the cut end carried on
     assert best.error < 0.5 * short.error and best.cost < short.cost
     front = Front(layouts={2: short}, routes=[arm, stem])
-    _extend(search, front, front.routes, p.size, OPTIONS, lambda text: None)
+    _extend(search, front, front.routes, p.size, OPTIONS)
     assert front.layouts[2].cost == best.cost and front.finished[2]
 
 
@@ -364,13 +366,13 @@ def test_worker_processes_find_the_same_front(searched):
 
     def run(workers):
         solved = FineSolves(fine, p.scene.optimize, "direct", workers)
-        front = search_front(p, st, p.scene.optimize, greedy, options, "direct", workers=workers,
-                             on_finished=solved.offer)
+        context = Context(p, st, p.scene.optimize, "direct", workers=workers)
+        front = search_front(context, greedy, options, on_finished=solved.offer)
         assert front.on_finished is None  # only while the search runs
         searched = copy.deepcopy(front)  # converging changes the front in place: it goes on with the same layouts
         finished = [lay for held in front.finished.values() for lay in held]
         early = [solved._started[id(lay)][1] for lay in finished if id(lay) in solved._started]
-        res = converge_front(front, p, st, fine, p.scene.optimize, options, "direct", workers=workers, solved=solved)
+        res = converge_front(front, context, fine, options, solved=solved)
         return searched, (front, res), (early, finished)
 
     alone, (alone_converged, alone_fine), (none_early, _) = run(None)
@@ -416,7 +418,7 @@ def test_a_prior_designs_layouts_read_back_are_the_same_robots(searched, tmp_pat
     p, st, _, front = searched
     priors = prior_layouts(read_prior(_prior_file(tmp_path, p, front), p.scene), p)
     assert [len(q.routes) for q in priors] == sorted(front.layouts)
-    search = _Search(p, st, p.scene.optimize, "direct", OPTIONS, route_settings(p, OPTIONS), "test", None)
+    search = _Search(Context(p, st, p.scene.optimize, "direct"), OPTIONS, route_settings(p, OPTIONS), "test")
     for q, k in zip(priors, sorted(front.layouts)):
         lay = front.layouts[k]
         for a, b in zip(q.routes, lay.routes):
@@ -434,11 +436,12 @@ def test_a_prior_design_gives_the_front_a_layout_its_lattice_did_not(searched, s
     from tendon_taichi.apps.priors import PRIOR, prior_layouts, read_prior
 
     p, st, _, front = searched
-    stem = [consolidate(p, _tendons(p, [straight[1][1]], st), st, p.scene.optimize, OPTIONS, "direct", source="c")]
-    alone = search_front(p, st, p.scene.optimize, stem, OPTIONS, "direct")
+    stem = [consolidate(Context(p, st, p.scene.optimize, "direct"), _tendons(p, [straight[1][1]], st), OPTIONS,
+                         source="c")]
+    alone = search_front(Context(p, st, p.scene.optimize, "direct"), stem, OPTIONS)
     assert sorted(alone.layouts) == [1] and alone.layouts[1].error > 0.005 and alone.priors == 0
     priors = prior_layouts(read_prior(_prior_file(tmp_path, p, front), p.scene), p)
-    helped = search_front(p, st, p.scene.optimize, stem, OPTIONS, "direct", priors=priors)
+    helped = search_front(Context(p, st, p.scene.optimize, "direct"), stem, OPTIONS, priors=priors)
     assert helped.priors == len(front.layouts) and helped.seeds == alone.seeds + len(front.layouts)
     assert helped.layouts[2].error < 1e-3 and PRIOR in helped.layouts[2].source
     assert helped.as_json()["priors"] == len(front.layouts)

@@ -213,8 +213,8 @@ def test_each_level_searches_from_the_level_befores_designs(tmp_path, monkeypatc
 
     seen = {}
 
-    def fake_suite(directory, level, out_dir, priors=None, **kwargs):
-        seen[level] = priors
+    def fake_suite(directory, level, out_dir, settings, **kwargs):
+        seen[level] = settings.priors
         for c in load_suite(directory)[:2]:  # two cases designed, the rest failed
             folder = case_folder(Path(out_dir) / "cases", c.name, level)
             folder.mkdir(parents=True)

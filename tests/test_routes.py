@@ -10,6 +10,7 @@ import pytest
 
 from tendon_taichi import build_problem, load_scene, parse_scene
 from tendon_taichi.body.spline import basis, bezier_pieces
+from tendon_taichi.extract.context import Context
 from tendon_taichi.extract.protocol import turn_angles
 from tendon_taichi.extract.routes import Route, fit_route, join_routes, keep_clear, sample_count
 from tendon_taichi.extract.routing import MAX_BEND, RouteObjective, RouteSettings, sharp_bends, turning
@@ -244,7 +245,7 @@ def test_a_point_valued_alone_leaves_the_next_gradient_exact(monkeypatch):
     adjoints = []
     solve = PoseSolve.adjoint
     monkeypatch.setattr(PoseSolve, "adjoint", lambda self, rhs: adjoints.append(1) or solve(self, rhs))
-    res = optimize_routes(p, [route], np.array([[0.08]]), p.scene.optimize, rs, "direct")
+    res = optimize_routes(Context(p, None, p.scene.optimize, "direct"), [route], np.array([[0.08]]), rs)
     assert res.objective < 0.1 * res.objective_start
     assert 0 < len(adjoints) < res.evaluations
 
@@ -263,7 +264,7 @@ def test_route_optimization_keeps_the_clearance_where_the_best_route_would_not()
     ends = []
     for clearance in (0.0, c):
         rs = RouteSettings(friction=0.3, clearance=clearance, iterations=15)
-        res = optimize_routes(p, [route], np.array([[0.08]]), p.scene.optimize, rs, "direct")
+        res = optimize_routes(Context(p, None, p.scene.optimize, "direct"), [route], np.array([[0.08]]), rs)
         assert res.objective < 0.02 * res.objective_start
         ends.append(p.walls.distance(res.routes[0].waypoints).min())
     assert ends[0] < 0.9 * c  # the constraint binds ...
@@ -291,7 +292,7 @@ def test_a_route_shrunk_to_a_point_is_a_step_too_far():
         with pytest.raises(ConvergenceError, match="shrunk to a point"):
             obj.evaluate(obj.pack([point], np.array([[0.05]])))
         assert np.isfinite(obj.evaluate(obj.pack([route], np.array([[0.05]])))[0])
-    res = optimize_routes(p, [point], np.array([[0.05]]), p.scene.optimize, rs, "direct")
+    res = optimize_routes(Context(p, None, p.scene.optimize, "direct"), [point], np.array([[0.05]]), rs)
     assert not np.isfinite(res.objective_start) or res.objective_start > 1.0
 
 

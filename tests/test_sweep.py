@@ -73,9 +73,7 @@ def in_process(sweep_file, tmp_path_factory):
     """The figures of every case, each run by sweep.run_case in this process."""
     sw = load_sweep(sweep_file)
     out = tmp_path_factory.mktemp("one-by-one")
-    return {c.id: figures(run_case(c.scene, c.level, sw.solver, sw.extractors, str(out / c.id), sw.consolidation,
-                                   sw.front))
-            for c in sw.cases}
+    return {c.id: figures(run_case(c.scene, c.level, str(out / c.id), sw.case_settings())) for c in sw.cases}
 
 
 def _sweep(sweep_file, out, *extra, timeout=600):

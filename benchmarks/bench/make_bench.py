@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 
 from tendon_taichi import load_scene
-from tendon_taichi.apps.bench import run_bench, table
+from tendon_taichi.apps.bench import BenchSettings, run_bench, table
 from tendon_taichi.files import write_json
 from tendon_taichi.solve.pardiso import PARALLEL_MIN
 
@@ -186,9 +186,9 @@ def main(argv=None) -> int:
         result = json.loads((args.out / "bench.json").read_text())
     else:
         with tempfile.TemporaryDirectory() as cases:  # the design folders are not results to check in
-            result = run_bench(load_scene("t_shape"), args.levels, ["cg", "cg-amg", "cg-gmg", "direct"], args.repeat,
-                               args.out, [] if args.no_optimize else args.optimize_levels, optimize_solver="auto",
-                               cases_dir=cases)
+            settings = BenchSettings(tuple(args.levels), ("cg", "cg-amg", "cg-gmg", "direct"), args.repeat,
+                                     () if args.no_optimize else args.optimize_levels, optimize_solver="auto")
+            result = run_bench(load_scene("t_shape"), settings, args.out, cases_dir=cases)
         if args.alone is not None:
             print(f"optimize t_shape at level {args.alone} in a process of its own ...", file=sys.stderr)
             result["alone"] = optimize_alone(args.alone)

@@ -19,9 +19,10 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from tendon_taichi import load_scene
-from tendon_taichi.apps.case import run_case
+from tendon_taichi.apps.case import CaseSettings, run_case
 from tendon_taichi.body.scene import with_overrides
 from tendon_taichi.cli.tendons import add_front_flags, front_settings
+from tendon_taichi.extract.settings import FrontSettings
 from tendon_taichi.io.plots import plot_story
 
 HERE = Path(__file__).resolve().parent
@@ -41,15 +42,14 @@ def main():
     scene = with_overrides(load_scene(SUITE / f"{args.case}.toml"),
                            {"stage_iterations": args.stage_iterations, "k_min": args.k_min})
     with tempfile.TemporaryDirectory() as tmp:
-        design = run_case(scene, args.level, Path(tmp) / "design", **front_settings(args))
+        settings = CaseSettings(front=FrontSettings(**front_settings(args)))
+        design = run_case(scene, args.level, Path(tmp) / "design", settings)
     run, rec = design.run, design.summary["recommended"]
     s0, final = run.stages[0], run.stages[-1]
     shown = SimpleNamespace(name=f"design, from {rec['source']}", metrics=rec["metrics"],
                             tendons=design.layout.tendons(), realizable=design.layout.realizable)
-    st = run.problem.scene.optimize
     out = plot_story(args.out, run.problem, layout, (s0.x, s0.tau, s0.figures),
-                     (final.x, final.tau, final.figures), shown, st.active_threshold * st.tension_scale,
-                     st.tension_scale)
+                     (final.x, final.tau, final.figures), shown)
     print(f"{out}: stage 0 {s0.figures.active_fibers} active, final {final.figures.active_fibers} active; "
           f"design: {rec['count']} tendons from {rec['source']}, as built "
           f"{100 * rec['metrics']['realizable_pose_error_rel']:.2f}% of L", file=sys.stderr)

@@ -23,6 +23,7 @@ import numpy as np
 from tendon_taichi import build_problem
 from tendon_taichi.apps.priors import read_prior
 from tendon_taichi.errors import ConvergenceError
+from tendon_taichi.extract.context import Context
 from tendon_taichi.extract.converge import pose_only_state
 from tendon_taichi.extract.realizable import solve_realizable_poses
 from tendon_taichi.io.recording import read_recording
@@ -44,8 +45,8 @@ def held_out(case: dict, above: int) -> list[tuple[int, float, float]]:
         if entry["count"] > case["planted_count"] + 1:
             break
         try:
-            error = solve_realizable_poses(far, [r.tendon() for r in layout.routes], state, run.settings,
-                                           run.meta.get("solver", "auto"), layout.ratios).pose_error_rel
+            context = Context(far, state, run.settings, run.meta.get("solver", "auto"))
+            error = solve_realizable_poses(context, [r.tendon() for r in layout.routes], layout.ratios).pose_error_rel
         except ConvergenceError:
             error = float("nan")
         out.append((entry["count"], entry["realizable_pose_error_rel"], error))

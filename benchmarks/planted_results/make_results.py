@@ -27,10 +27,12 @@ import tomllib
 from pathlib import Path
 
 from tendon_taichi.cli.tendons import add_front_flags, front_settings
-from tendon_taichi.planted.bench import load_suite, route_rule, run_suite
+from tendon_taichi.extract.settings import FrontSettings
+from tendon_taichi.planted.bench import SuiteSettings, load_suite, route_rule, run_suite
 from tendon_taichi.planted.gallery import gallery_figure
 from tendon_taichi.planted.levels import compare_levels, fronts_figure, prior_designs
 from tendon_taichi.planted.levels import table as levels_table
+from tendon_taichi.tasks.engine import Cluster
 from tendon_taichi.version import provenance
 
 HERE = Path(__file__).resolve().parent
@@ -169,8 +171,8 @@ def main(argv=None) -> int:
         run_dir = args.runs / f"r{level}"
         coarser = not args.independent_levels and before is not None
         priors = prior_designs(SUITE, args.runs / f"r{before}", before) if coarser else None
-        runs.append(run_suite(SUITE, level, run_dir, overrides, cases=args.cases, workers=args.workers, front=front,
-                              priors=priors))
+        settings = SuiteSettings(cases=args.cases, overrides=overrides, front=FrontSettings(**front), priors=priors)
+        runs.append(run_suite(SUITE, level, run_dir, settings, Cluster(workers=args.workers)))
         args.out.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(run_dir / "planted_bench.csv", args.out / f"planted_bench_level{level}.csv")
         shutil.copyfile(run_dir / "gallery.png", args.out / f"gallery_level{level}.png")

@@ -11,7 +11,7 @@ import argparse
 import json
 import time
 
-from tendon_taichi.tasks.engine import Task, run_tasks
+from tendon_taichi.tasks.engine import Cluster, Task, run_tasks
 
 
 def nothing(i: int) -> dict:
@@ -26,10 +26,10 @@ def main() -> None:
     tasks = [Task(f"noop{i}", f"noop {i}", nothing, (i,)) for i in range(args.tasks)]
     quiet = lambda msg: None  # noqa: E731
     t = time.perf_counter()
-    local = run_tasks(tasks, None, 0, None, quiet)
+    local = run_tasks(tasks, None, Cluster(workers=0), quiet)
     in_process = (time.perf_counter() - t) / args.tasks
     t = time.perf_counter()
-    rep = run_tasks(tasks, None, args.workers, None, quiet)
+    rep = run_tasks(tasks, None, Cluster(workers=args.workers), quiet)
     wall = time.perf_counter() - t
     e = rep.engine
     assert len(rep.outcomes) == args.tasks and all(o.error is None for o in rep.outcomes + local.outcomes)

@@ -7,8 +7,8 @@ from .._lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     ".simulate": ("Simulation", "simulate", "contraction_ratios"),
-    ".optimize": ("RunResult", "Interrupted", "optimize"),
+    ".optimize": ("RunResult", "RunOptions", "Interrupted", "optimize"),
     ".replay": ("replay",),
     ".extract": ("Extraction", "ExtractorResult", "extract"),
-    ".case": ("CaseResult", "run_case"),
+    ".case": ("CaseResult", "CaseSettings", "run_case"),
 })

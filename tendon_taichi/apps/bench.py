@@ -22,6 +22,7 @@ import resource
 import statistics
 import sys
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,9 +40,9 @@ from ..solve.linear import resolve_solver
 from ..solve.newton import NewtonSolver
 from ..solve.pardiso import available as pardiso_available
 from ..solve.pardiso import threaded as pardiso_threaded
-from ..tasks.engine import Task, case_id, run_tasks
+from ..tasks.engine import Cluster, Task, case_id, run_tasks
 from .baseline import BaselineGradient
-from .case import STOP, run_case, worker_setup
+from .case import STOP, CaseSettings, run_case, worker_setup
 from .provenance import result_provenance
 
 #: seconds-valued figures, in the order of the table and the plot
@@ -197,7 +198,7 @@ def optimize_case(scene: Scene, level: int, solver: str, out_dir: str) -> dict:
     extractor on its last stage with consolidation and route optimization, the
     recommended design - (a task of :func:`~tendon_taichi.tasks.engine.run_tasks`)."""
     out = Path(out_dir) / f"{file_stem(scene.name)}-r{level}-{solver}"
-    case = run_case(scene, level, out, solver)
+    case = run_case(scene, level, out, CaseSettings(solver=solver))
     run, timing = case.run, case.summary["timing"]
     dt = timing["optimize_s"]
     final = run.summary["final"]
@@ -225,20 +226,34 @@ def _describe_optimize(res: dict) -> str:
             f"{100 * res['pose_error_rel']:.2f} %, active {100 * res['active_length']:.1f} cm; tendons: {tendons}")
 
 
-def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int = 3,
-              out_dir: str | Path = "recordings/bench", optimize_levels: list[int] | None = None,
-              forward_max_fibers: int = 2500, progress=None, optimize_solver: str = "each",
-              workers: int | None = 0, scheduler: str | None = None,
-              cases_dir: str | Path | None = None) -> dict:
-    """Run the benchmark and write bench.json, bench.csv and bench.png into ``out_dir``
-    (the design pipeline's folders into ``cases_dir``, default ``out_dir``).
+@dataclass(frozen=True)
+class BenchSettings:
+    """What the benchmark measures: the resolution ``levels`` and linear ``solvers``,
+    each timing the median of ``repeat`` runs; the forward sensitivities only up to
+    ``forward_max_fibers`` fibers; the whole design pipeline at ``optimize_levels``
+    (None: every level), with every measured solver (``optimize_solver`` ``each``) or
+    once per level with the backend ``--solver auto`` picks at that size (``auto``,
+    what a user gets by default, reported under that backend)."""
 
-    ``optimize_solver``: ``each`` runs the whole optimization with every measured
-    solver; ``auto`` once per level, with the backend that ``--solver auto`` picks
-    at that size (what a user gets by default), reported under that backend.
-    The optimizations run after all other measurements, as tasks of
-    :func:`tendon_taichi.tasks.engine.run_tasks` (``workers`` 0, the default: in this
-    process, one after the other; else on a local or an existing Dask cluster)."""
+    levels: tuple[int, ...]
+    solvers: tuple[str, ...]
+    repeat: int = 3
+    optimize_levels: tuple[int, ...] | None = None
+    forward_max_fibers: int = 2500
+    optimize_solver: str = "each"
+
+
+def run_bench(scene: Scene, settings: BenchSettings, out_dir: str | Path = "recordings/bench",
+              cluster: Cluster = Cluster(workers=0), progress=None, cases_dir: str | Path | None = None) -> dict:
+    """Run the benchmark ``settings`` describe and write bench.json, bench.csv and
+    bench.png into ``out_dir`` (the design pipeline's folders into ``cases_dir``,
+    default ``out_dir``). The optimizations run after all other measurements, as
+    tasks of :func:`tendon_taichi.tasks.engine.run_tasks` on ``cluster`` (its
+    ``workers`` 0, the default: in this process, one after the other; else on a
+    local or an existing Dask cluster)."""
+    levels, solvers, repeat = settings.levels, settings.solvers, settings.repeat
+    optimize_levels, optimize_solver = settings.optimize_levels, settings.optimize_solver
+    forward_max_fibers = settings.forward_max_fibers
     if len(scene.poses) > 1:
         raise InputError(f"bench measures one-pose scenes; '{scene.name}' has {len(scene.poses)} poses")
     reporter = Progress() if progress is None else progress
@@ -267,8 +282,8 @@ def run_bench(scene: Scene, levels: list[int], solvers: list[str], repeat: int =
         entry["baseline_gradient_s"] = measure_baseline(p, repeat, progress)
         entry["gradient_speedup"] = speedups(entry)
         rows.append(entry)
-    report = run_tasks([t for _, t in jobs], None, workers, scheduler, reporter, describe=_describe_optimize,
-                       setup=worker_setup(), stop=STOP)
+    report = run_tasks([t for _, t in jobs], None, replace(cluster, setup=worker_setup(), stop=STOP), reporter,
+                       describe=_describe_optimize)
     figs = {t.id: fig for fig, t in jobs}
     for o in report.outcomes:
         fig = figs[o.task.id]

@@ -11,11 +11,12 @@ Taichi, compile the kernels by a short case)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
 from ..body.scene import Scene
-from ..extract.settings import BEAM, BUDGET, ConsolidationSettings
+from ..extract.settings import BUDGET, ConsolidationSettings, FrontSettings
 from ..physics import runtime
 from .design import Design, design, start_worker
 from .optimize import Interrupted
@@ -24,19 +25,34 @@ from .optimize import Interrupted
 STOP = (Interrupted,)
 
 
-def run_case(scene: Scene, level: int, out: str | Path, solver: str = "auto",
-             extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
-             budget: float = BUDGET, png: bool = False, beam: int = BEAM, converge: bool = True,
-             routes_from: str | Path | None = None) -> Design:
+@dataclass(frozen=True)
+class CaseSettings:
+    """How a case is designed: with the linear ``solver`` and the ``extractors``
+    (None: every installed one), each followed by ``consolidation`` (None: the
+    defaults with ``budget``); ``budget`` (fraction of L) also picks the
+    recommendation; ``front``, the count/error front's search; ``png`` draws the
+    pictures; ``routes_from``, a prior design whose front the front searches from
+    too. Pickled whole to the task that runs the case."""
+
+    solver: str = "auto"
+    extractors: tuple[str, ...] | None = None
+    consolidation: ConsolidationSettings | None = None
+    budget: float = BUDGET
+    front: FrontSettings = FrontSettings()
+    png: bool = False
+    routes_from: str | None = None
+
+
+def run_case(scene: Scene, level: int, out: str | Path, settings: CaseSettings = CaseSettings()) -> Design:
     """The design of ``scene`` at ``level`` into the folder ``out`` (``run.rrd``,
-    ``run.npz``, ``design.json``, ``design.svg``; the pictures with ``png``), with
-    ``extractors`` (default: every installed one), each followed by
-    ``consolidation`` (default settings, with ``budget``, if None); ``beam``: the
-    front's beam width; ``converge`` re-solves the front on the next finer mesh;
-    ``routes_from``: a prior design whose front the front searches from too."""
-    return design(scene, level, out, solver, budget, extractors=extractors,
-                  consolidation=consolidation or ConsolidationSettings(budget=budget), png=png, beam=beam,
-                  converge=converge, routes_from=routes_from)
+    ``run.npz``, ``design.json``, ``design.svg``; the pictures with ``settings.png``),
+    designed as ``settings`` says."""
+    s = settings
+    extractors = None if s.extractors is None else list(s.extractors)
+    return design(scene, level, out, s.solver, s.budget, extractors=extractors,
+                  consolidation=s.consolidation or ConsolidationSettings(budget=s.budget), png=s.png,
+                  beam=s.front.beam, converge=s.front.converge, max_tendons=s.front.max_tendons,
+                  routes_from=s.routes_from)
 
 
 def worker_setup(warm: bool = True):

@@ -26,11 +26,12 @@ from ..body.problem import build_problem
 from ..body.scene import Scene
 from ..errors import InputError, TendonError
 from ..extract.consolidation import Layout
+from ..extract.context import Context
 from ..extract.converge import FineSolves, converge_front
 from ..extract.front import Front, search_front
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.realizable import as_built_arrays
-from ..extract.settings import BEAM, BUDGET, ConsolidationSettings
+from ..extract.settings import BEAM, BUDGET, ConsolidationSettings, FrontSettings
 from ..files import check_writable, file_stem, write_json
 from ..io.drawing import write_svg
 from ..io.export import write_as_built
@@ -40,7 +41,7 @@ from ..io.recording import rewrite
 from ..physics import runtime
 from ..tasks.pool import Pool
 from .extract import Extraction, extract, frictionless_error, log_layout
-from .optimize import RunResult, optimize
+from .optimize import RunOptions, RunResult, optimize
 from .priors import PriorDesign, prior_layouts, read_prior, route_rows
 from .provenance import result_provenance
 
@@ -201,7 +202,8 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     with Pool(workers, start_worker, (here["threads"], here["arch"])) as pool, runtime.cores_shared(workers > 0):
         progress.message(f"design: optimizing {scene.name} at level {level}"
                          + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
-        run = optimize(scene, level, solver, record=out / "run.rrd", export=out / "run.npz", progress=progress)
+        run = optimize(scene, level, solver, record=out / "run.rrd", progress=progress,
+                       options=RunOptions(export=out / "run.npz"))
         check_reach(run, budget)
         for w in run.warnings:  # now, not only with the design: the search may take long
             progress.message(f"design: warning: {w}")
@@ -277,8 +279,9 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
         priors = prior_layouts(prior, problem)
         log(f"{len(priors)} of the {len(prior.layouts)} layouts of '{prior.path}' join the front's seeds")
     finer = FinerMesh(problem, ex.run.settings, solver, workers) if converge else None
-    front = search_front(problem, ex.state, ex.run.settings, done, cons, solver, max_tendons, beam, log, workers,
-                         priors, None if finer is None else finer.offer)
+    front = search_front(Context(problem, ex.state, ex.run.settings, solver, log=log, workers=workers), done, cons,
+                         FrontSettings(beam=beam, max_tendons=max_tendons), priors=priors,
+                         on_finished=None if finer is None else finer.offer)
     if not front.layouts:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)" if max_tendons
                          else "no extractor's tendons make a layout of one tendon or more" + _pattern_said(ex))
@@ -356,8 +359,8 @@ def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings,
     if finer.solves is None:
         log(f"the level-{level} mesh was not built ({finer.error}); the front's errors are at level {level - 1}")
         return {**out, "error": finer.error, "time_s": time.perf_counter() - t0 + finer.build_s}
-    out["results"] = converge_front(front, ex.problem, ex.state, finer.solves.fine, ex.run.settings, cons, solver, log,
-                                    workers, finer.solves)
+    out["results"] = converge_front(front, Context(ex.problem, ex.state, ex.run.settings, solver, log=log,
+                                                   workers=workers), finer.solves.fine, cons, finer.solves)
     out["time_s"] = time.perf_counter() - t0 + finer.build_s
     return out
 

@@ -17,6 +17,7 @@ from ..body.problem import Problem
 from ..errors import ConvergenceError, InputError
 from ..extract.checks import PLUGIN_TIMEOUT, call_plugin, check_tendons, read_only_copy
 from ..extract.consolidation import Consolidation, ConsolidationSettings, consolidate
+from ..extract.context import Context
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.plugins import available_extractors, load_extractor
 from ..extract.protocol import IdealizedState, PluginError, Tendon
@@ -168,8 +169,8 @@ def _consolidated(problem: Problem, tendons: list[Tendon], state: IdealizedState
     """The tendons consolidated (:func:`consolidate`), or why their robot cannot be
     solved (the equilibrium's error)."""
     try:
-        return consolidate(problem, tendons, state, settings, consolidation or ConsolidationSettings(), solver,
-                           source=name, log=log)
+        return consolidate(Context(problem, state, settings, solver, log=log), tendons,
+                           consolidation or ConsolidationSettings(), source=name)
     except ConvergenceError as exc:
         return str(exc)
 
@@ -251,7 +252,7 @@ def frictionless_error(problem: Problem, tendons: list[Tendon], state: Idealized
     if problem.scene.tendons.friction == 0.0 or not tendons:
         return real.pose_error_rel
     bare = problem.with_tendons(friction=0.0)
-    return solve_realizable_poses(bare, tendons, state, settings, solver, real.ratios).pose_error_rel
+    return solve_realizable_poses(Context(bare, state, settings, solver), tendons, real.ratios).pose_error_rel
 
 
 def extract(path: str | Path, names: list[str] | None = None, stage: int | None = None,

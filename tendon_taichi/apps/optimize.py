@@ -70,9 +70,9 @@ def _recorded_stage(rs, problem: Problem) -> StageResult:
     are found when needed (:func:`_complete`)."""
     s = rs.summary
     fig = Figures(s["pose_error"], s["pose_error_rel"], s["pose_error_max"], s["active_fibers"],
-                  s["active_length"], s["tau_max"], s["objective"], s.get("poses"))
-    return StageResult(s["stage"], s["k"], s["iterations"], s["evaluations"], s["time_s"], fig,
-                       rs.r, rs.ac, rs.tau, rs.xs, message=s.get("message", ""))
+                  s["active_length"], tau_max=s["tau_max"], objective=s["objective"], poses=s.get("poses"))
+    return StageResult(s["stage"], s["k"], s["iterations"], s["evaluations"], s["time_s"], figures=fig,
+                       r=rs.r, ac=rs.ac, tau=rs.tau, xs=rs.xs, message=s.get("message", ""))
 
 
 def _complete(ik: SoftIK, st: StageResult) -> None:
@@ -87,18 +87,28 @@ def _complete(ik: SoftIK, st: StageResult) -> None:
         st.taus = np.array([ps.model.tensions_at(ac, x) for ps, ac, x in zip(ik.poses, acs, st.xs)])
 
 
-def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
-             record: str | Path | None = None, export: str | Path | None = None, log_every: int = 0,
-             progress: Progress | None = None, resume: str | Path | None = None,
-             png: str | Path | None = None) -> RunResult:
+@dataclass(frozen=True)
+class RunOptions:
+    """What else :func:`optimize` does: continue the run recorded in ``resume``;
+    write the final problem export to ``export`` (None: beside the recording); log
+    the geometry every ``log_every`` iterations (0: at each stage's end only); draw
+    stage 0 beside the final stage into ``png`` ("-": beside the recording)."""
+
+    resume: str | Path | None = None
+    export: str | Path | None = None
+    log_every: int = 0
+    png: str | Path | None = None
+
+
+def optimize(scene: Scene, level: int | None = None, solver: str | None = None, record: str | Path | None = None,
+             progress: Progress | None = None, options: RunOptions = RunOptions()) -> RunResult:
     """Run the regularized soft IK on ``scene`` at resolution ``level`` (default
     1) with the linear ``solver`` (default "auto"), or continue the run recorded
-    in ``resume`` at its own level and solver and on its own scene (``scene``
-    may be None; a different level, solver or scene given is refused),
-    recording every stage to ``record`` and writing the final problem export to
-    ``export`` (default: beside the recording); ``png`` draws stage 0 beside the
-    final stage ("-": beside the recording)."""
+    in ``options.resume`` at its own level and solver and on its own scene
+    (``scene`` may be None; a different level, solver or scene given is refused),
+    recording every stage to ``record``, and the rest ``options`` say."""
     t0 = time.perf_counter()
+    resume, export, log_every, png = options.resume, options.export, options.log_every, options.png
     progress = progress or active() or Progress(enabled=False)
     completed: list[StageResult] = []
     if resume is not None:
@@ -128,20 +138,20 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
     solver = ik.linear.name
     meta["solver"] = solver
 
-    recorder, tmp = _open_recorder(record, problem, settings, meta, log_every, resume, len(completed))
+    recorder, tmp = _open_recorder(record, problem, settings, meta, log_every, resume=resume, n_done=len(completed))
     step = [sum(s.iterations for s in completed)]
     finished = list(completed)  # what the recording holds
 
     def on_iteration(it: Iterate):
         step[0] += 1
-        recorder.iteration(step[0], it.stage, it.k, it.figures, it.xs, it.taus, local=it.iteration)
+        recorder.iteration(step[0], it, local=it.iteration)
         progress.iteration(it)
 
     def on_stage_start(stage, k):
         progress.stage_start(stage, k, settings.stage_iterations)
 
     def on_stage(st: StageResult):
-        recorder.iteration(step[0], st.stage, st.k, st.figures, st.xs, st.taus, force=True)
+        recorder.iteration(step[0], st, force=True)
         recorder.stage(st, step[0])
         if tmp is not None:
             _promote(tmp)
@@ -154,8 +164,8 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
         stages = run_schedule(ik, callbacks, completed=completed)
     except KeyboardInterrupt:
         recorder.close()
-        raise Interrupted(len(finished), record, _summary(problem, solver, finished, record, None, t0, ik,
-                                                          {"interrupted": True})) from None
+        raise Interrupted(len(finished), record, _summary(problem, solver, finished, record, None, t0=t0, ik=ik,
+                                                          extra={"interrupted": True})) from None
     recorder.close()
     if tmp is not None:
         _promote(tmp)
@@ -187,8 +197,8 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
         plot_stages(png, problem, panels, settings.active_threshold * settings.tension_scale,
                     settings.tension_scale)
         extra["png"] = str(png)
-    summary = _summary(problem, solver, stages, record, export, t0, ik, extra)
-    return RunResult(problem, stages, summary, record, export, warnings)
+    summary = _summary(problem, solver, stages, record, export, t0=t0, ik=ik, extra=extra)
+    return RunResult(problem, stages, summary, record, export, warnings=warnings)
 
 
 def _check_resumable(run: RecordedRun, level: int | None, solver: str | None, scene: Scene | None) -> None:

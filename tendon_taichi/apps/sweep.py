@@ -30,13 +30,13 @@ from pathlib import Path
 from ..body.scene import Scene, load_scene, with_overrides
 from ..errors import InputError, Stopped
 from ..extract.plugins import available_extractors, unknown_extractor
-from ..extract.settings import BUDGET, FRONT_DEFAULTS, ConsolidationSettings, front_id
+from ..extract.settings import BUDGET, FRONT_DEFAULTS, ConsolidationSettings, FrontSettings, front_id
 from ..files import atomic_path, write_json
 from ..io.plots import plot_sweep
 from ..io.progress import Progress
 from ..solve.linear import SOLVERS
-from ..tasks.engine import Task, case_id, run_tasks
-from .case import STOP, worker_setup
+from ..tasks.engine import Cluster, Task, case_id, run_tasks
+from .case import STOP, CaseSettings, worker_setup
 from .case import run_case as run_one
 from .provenance import result_provenance
 
@@ -90,6 +90,13 @@ class Sweep:
     cases: tuple[SweepCase, ...]
     consolidation: dict = field(default_factory=dict)  # the [consolidation] table: ConsolidationSettings fields
     front: dict = field(default_factory=lambda: dict(FRONT_DEFAULTS))  # the [front] table over the defaults
+
+    def case_settings(self) -> CaseSettings:
+        """How each case is designed: the sweep's solver, extractors, [consolidation]
+        (its budget, else the default, also picks the recommendation) and [front]."""
+        cons = ConsolidationSettings(**self.consolidation)
+        return CaseSettings(solver=self.solver, extractors=tuple(self.extractors), consolidation=cons,
+                            budget=cons.budget or BUDGET, front=FrontSettings(**self.front))
 
 
 def _fail(origin: str, msg: str):
@@ -164,8 +171,8 @@ def parse_sweep(doc: dict, origin: str = "<sweep>", base: Path | None = None,
                            "tendons": given, "extractors": list(extractors), "solver": solver,
                            "consolidation": consolidation, **front_id(front)})
             cases.append(SweepCase(cid, sc, level, settings, point))
-    return Sweep(name, None, tuple(loaded), tuple(levels), tuple(extractors), solver, dict(grid), dict(fixed),
-                 tuple(cases), consolidation, front)
+    return Sweep(name, None, tuple(loaded), tuple(levels), tuple(extractors), solver=solver, grid=dict(grid),
+                 fixed=dict(fixed), cases=tuple(cases), consolidation=consolidation, front=front)
 
 
 def _consolidation(table, origin: str) -> dict:
@@ -223,19 +230,15 @@ DESIGN_KEYS = ("realizable_pose_error_rel", "realizable_pose_error_rel_frictionl
                "clearance_min", "total_length")
 
 
-def run_case(scene: Scene, level: int, solver: str, extractors: tuple[str, ...], case_dir: str,
-             consolidation: dict | None = None, front: dict | None = None) -> dict:
-    """Design ``scene`` at ``level`` with ``extractors`` (and the fields of
-    :class:`~tendon_taichi.extract.settings.ConsolidationSettings` given in
-    ``consolidation``, the front's ``beam`` and ``converge`` in ``front``) into
-    ``case_dir`` (``run.rrd``, ``run.npz``, ``design.json``, ``design.svg``,
+def run_case(scene: Scene, level: int, case_dir: str, settings: CaseSettings = CaseSettings()) -> dict:
+    """Design ``scene`` at ``level`` as ``settings`` say (:meth:`Sweep.case_settings`)
+    into ``case_dir`` (``run.rrd``, ``run.npz``, ``design.json``, ``design.svg``,
     ``optimize.json``, ``compare.json``). Returns the case's
     figures: ``optimize`` (the final stage), ``extract`` (per extractor its
     metrics, or its error), ``design`` (the recommended design's count, source
     and figures), ``stages``."""
     d = Path(case_dir)
-    cons = ConsolidationSettings(**(consolidation or {}))
-    case = run_one(scene, level, d, solver, list(extractors), cons, budget=cons.budget or BUDGET, **(front or {}))
+    case = run_one(scene, level, d, settings)
     run, comp = case.run, case.extraction.as_json()
     write_json(run.summary, d / "optimize.json")
     write_json(comp, d / "compare.json")
@@ -266,11 +269,10 @@ def run(sweep: Sweep | str | Path, out_dir: str | Path, workers: int | None = No
     sw = sweep if isinstance(sweep, Sweep) else load_sweep(sweep)
     out = Path(out_dir)
     t0 = time.perf_counter()
-    tasks = [Task(c.id, c.label, run_case, (c.scene, c.level, sw.solver, sw.extractors, str(out / "cases" / c.id),
-                                             sw.consolidation, sw.front))
-             for c in sw.cases]
-    report = run_tasks(tasks, out / "cases", workers, scheduler, progress or Progress(), describe=_describe,
-                       setup=worker_setup(), stop=STOP)
+    settings = sw.case_settings()
+    tasks = [Task(c.id, c.label, run_case, (c.scene, c.level, str(out / "cases" / c.id), settings)) for c in sw.cases]
+    report = run_tasks(tasks, out / "cases", Cluster(workers, scheduler, setup=worker_setup(), stop=STOP),
+                       progress or Progress(), describe=_describe)
     by_id = {c.id: c for c in sw.cases}
     rows = [case_row(by_id[o.task.id], o) for o in report.outcomes]
     result = {"name": sw.name, "sweep": str(sw.path) if sw.path else None,

@@ -85,5 +85,5 @@ class CableSet:
             start.append(start[-1] + k - 1)
             a0.append(float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()))
             base += k
-        return CableSet(emb, np.concatenate(segs), np.array(start, dtype=np.int64),
-                        np.array(a0), np.full(len(paths), float(stiffness)), float(friction))
+        return CableSet(emb, np.concatenate(segs), np.array(start, dtype=np.int64), np.array(a0),
+                        stiffness=np.full(len(paths), float(stiffness)), friction=float(friction))

@@ -166,4 +166,4 @@ def build_problem(scene: Scene, level: int = 1) -> Problem:
         where = ", ".join(f"{c:g}" for c in points[i])
         raise SceneError(f"{scene.origin}: {scene.target_label(i)}.point [{where}] lies outside the body")
     goals = np.array([t.goal for t in scene.targets], dtype=float)
-    return Problem(scene, int(level), mesh, fixed, fibers, target, goals)
+    return Problem(scene, int(level), mesh, fixed, fibers, target=target, target_goal=goals)

@@ -324,7 +324,7 @@ def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None
                                     "optimize", origin), fibers)
     tendons = _read_tendons(TableReader(doc.raw("tendons") if doc.has("tendons") else {}, "tendons", origin))
     doc.finish()
-    return Scene(name, body, fibers, tuple(fixed), poses, opt, text, origin, tendons)
+    return Scene(name, body, fibers, tuple(fixed), poses, optimize=opt, source=text, origin=origin, tendons=tendons)
 
 
 def _read_targets(holder: TableReader, where: str) -> tuple[Target, ...]:

@@ -17,7 +17,8 @@ from .tendons import (add_consolidation_flags, add_front_flags, add_tendon_flags
 
 # ------------------------------------------------------------------ bench
 def cmd_bench(args) -> int:
-    from ..apps.bench import run_bench, table
+    from ..apps.bench import BenchSettings, run_bench, table
+    from ..tasks.engine import Cluster
     from ..body.scene import load_scene
 
     scene = load_scene(args.scene)
@@ -28,9 +29,10 @@ def cmd_bench(args) -> int:
     optimize_levels = [] if args.no_optimize else args.optimize_levels
     workers, scheduler = cluster_args(args)
     workers = 0 if workers is None and scheduler is None else workers
-    result = run_bench(scene, args.level, args.solver, args.repeat, args.out, optimize_levels,
-                       args.forward_max_fibers, optimize_solver=args.optimize_solver, workers=workers,
-                       scheduler=scheduler)
+    settings = BenchSettings(tuple(args.level), tuple(args.solver), args.repeat,
+                             None if optimize_levels is None else tuple(optimize_levels), args.forward_max_fibers,
+                             optimize_solver=args.optimize_solver)
+    result = run_bench(scene, settings, args.out, Cluster(workers, scheduler))
     json_out(args, result)
     if args.json != "-":
         print("\n".join(table(result)))
@@ -79,16 +81,19 @@ def cmd_planted(args) -> int:
 
 # ------------------------------------------------------------------ planted-bench
 def cmd_planted_bench(args) -> int:
-    from ..planted.bench import run_suite, table
+    from ..extract.settings import FrontSettings
+    from ..planted.bench import SuiteSettings, run_suite, table
+    from ..tasks.engine import Cluster
 
     overrides = optimize_overrides(args)
     workers, scheduler = cluster_args(args)
     levels = args.levels or args.level
     if any(lv < 1 for lv in levels):
         raise InputError(f"--level must be >= 1 (got {min(levels)})")
-    kwargs = dict(overrides=overrides, extractors=args.extractors, solver=args.solver, cases=args.cases,
-                  workers=workers, scheduler=scheduler, consolidation=consolidation(args),
-                  tendons=tendon_settings(args), front=front_settings(args))
+    settings = SuiteSettings(cases=args.cases, overrides=overrides, tendons=tendon_settings(args), solver=args.solver,
+                             extractors=args.extractors, consolidation=consolidation(args),
+                             front=FrontSettings(**front_settings(args)))
+    kwargs = dict(settings=settings, cluster=Cluster(workers, scheduler))
     if args.levels or len(set(levels)) > 1:
         from ..planted.levels import run_levels
         from ..planted.levels import table as levels_table

@@ -126,7 +126,7 @@ def _stage_table(stages: list[dict]) -> list[str]:
 
 
 def cmd_optimize(args) -> int:
-    from ..apps.optimize import Interrupted, optimize
+    from ..apps.optimize import Interrupted, RunOptions, optimize
     from ..body.scene import load_scene, with_overrides
     from ..io.progress import Progress
 
@@ -143,9 +143,10 @@ def cmd_optimize(args) -> int:
     if args.log_every < 0:
         raise InputError(f"--log-every must be >= 0 (got {args.log_every})")
     try:
-        result = optimize(scene, args.level, args.solver, record=args.record, export=args.export,
-                          log_every=args.log_every, progress=Progress(enabled=not args.quiet),
-                          resume=args.resume, png=args.png)
+        result = optimize(scene, args.level, args.solver, record=args.record,
+                          progress=Progress(enabled=not args.quiet),
+                          options=RunOptions(resume=args.resume, export=args.export, log_every=args.log_every,
+                                             png=args.png))
     except Interrupted as exc:
         if args.json not in (None, "-"):
             json_out(args, exc.summary)

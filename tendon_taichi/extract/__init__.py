@@ -14,6 +14,7 @@ __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     ".metrics": ("MetricSettings", "tendon_metrics"),
     ".realizable": ("RealizableResult", "solve_realizable", "solve_realizable_poses", "predict_realizable",
                     "tendon_cables"),
-    ".settings": ("ConsolidationSettings",),
+    ".settings": ("ConsolidationSettings", "FrontSettings"),
+    ".context": ("Context",),
     ".consolidation": ("Consolidation", "consolidate"),
 })

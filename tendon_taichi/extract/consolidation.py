@@ -53,8 +53,8 @@ import numpy as np
 
 from ..body.problem import Problem
 from ..errors import ConvergenceError
-from ..objective.settings import OptimizeSettings
 from ..tasks.pool import Pool
+from .context import Context
 from .protocol import IdealizedState, Tendon, turn_angles
 from .realizable import RealizableResult, pose_tension, predict_realizable, solve_realizable_poses, warm_ratios
 from .routes import Route, fit_route, join_routes, keep_clear, sample_count
@@ -191,28 +191,29 @@ TALLY = ("evaluations", "unsolved", "screened", "route_evaluations", "route_s")
 
 
 class _Search:
-    """Solves and ranks layouts on the as-built robot, counting them in ``out``."""
+    """Solves and ranks layouts on the as-built robot of ``context``, counting them in ``out``."""
 
-    def __init__(self, problem: Problem, state: IdealizedState, settings: OptimizeSettings, solver: str,
-                 options: ConsolidationSettings, route_settings: RouteSettings, source: str,
-                 log: Callable[[str], None] | None):
-        self.problem, self.state, self.settings, self.solver = problem, state, settings, solver
+    def __init__(self, context: Context, options: ConsolidationSettings, route_settings: RouteSettings,
+                 source: str):
+        self.context = context
+        self.problem, self.state, self.settings, self.solver = (context.problem, context.state, context.settings,
+                                                                context.solver)
         self.options, self.rs, self.source = options, route_settings, source
-        self.log = log or (lambda text: None)
+        self.log = context.say
         self.out: Consolidation | None = None
         #: worker processes that share the full solves and the screen of :meth:`ranked` (None: none)
-        self.workers: Pool | None = None
+        self.workers: Pool | None = context.workers
 
     # ------------------------------------------------------------ the same search in a worker process
     def spec(self) -> tuple:
         """What a worker process needs to make this search again (:meth:`again`): its
-        arguments but the log (all of them picklable)."""
-        return self.problem, self.state, self.settings, self.solver, self.options, self.rs, self.source
+        arguments (the context pickles without its log and workers)."""
+        return self.context, self.options, self.rs, self.source
 
     @classmethod
     def again(cls, spec: tuple, layout: Layout) -> "_Search":
         """The search ``spec`` describes, silent, counting into a tally of its own."""
-        search = cls(*spec, None)
+        search = cls(*spec)
         search.out = Consolidation(layout, 0, 0.0)
         return search
 
@@ -240,7 +241,7 @@ class _Search:
         if self.out is not None:
             self.out.evaluations += 1
         try:
-            real = solve_realizable_poses(self.problem, tendons, self.state, self.settings, self.solver, start,
+            real = solve_realizable_poses(self.context, tendons, start,
                                           None if near is None else positions(near.realizable))
         except ConvergenceError:  # a layout whose robot cannot be solved is not proven: skip it
             if self.out is not None:
@@ -304,8 +305,8 @@ class _Search:
         from ``now``'s solution predicts them (None, None where it fails)."""
         self.out.screened += 1
         try:
-            error, ratios = predict_realizable(self.problem, [r.tendon() for r in routes], self.settings, start,
-                                               positions(now.realizable), self.solver)
+            error, ratios = predict_realizable(self.context, [r.tendon() for r in routes], start,
+                                               positions(now.realizable))
         except ConvergenceError:
             self.out.unsolved += 1
             return None, None
@@ -384,8 +385,8 @@ class _Search:
             real = now.realizable
             self.log(f"{self.source}: optimizing {len(routes)} route(s), round {k + 1}")
             t0 = time.perf_counter()
-            res = optimize_routes(self.problem, routes, np.atleast_2d(real.ratios).reshape(self.problem.n_poses, -1),
-                                  self.settings, rs, self.solver, positions(real))
+            res = optimize_routes(self.context, routes, np.atleast_2d(real.ratios).reshape(self.problem.n_poses, -1),
+                                  rs, positions(real))
             self.out.route_evaluations += res.evaluations
             self.out.route_s += time.perf_counter() - t0
             cleared = [keep_clear(r, self.problem.walls, self.rs.clearance) for r in res.routes]
@@ -431,15 +432,15 @@ def extracted_routes(problem: Problem, tendons: list[Tendon], state: IdealizedSt
     return routes, np.array(tensions).reshape(len(routes), len(states)).T
 
 
-def consolidate(problem: Problem, tendons: list[Tendon], state: IdealizedState, settings: OptimizeSettings,
-                options: ConsolidationSettings, solver: str = "auto", source: str = "",
-                log: Callable[[str], None] | None = None) -> Consolidation:
-    """Routes from an extractor's ``tendons``, then greedy drops and smooth joins,
-    then orientation and route optimization (module docstring). With consolidation
-    off (``options.enabled`` false), the fitted routes as they are."""
-    rs = route_settings(problem, options)
-    search = _Search(problem, state, settings, solver, options, rs, source, log)
-    routes, tensions = extracted_routes(problem, tendons, state, rs.clearance, source)
+def consolidate(context: Context, tendons: list[Tendon], options: ConsolidationSettings,
+                source: str = "") -> Consolidation:
+    """Routes from an extractor's ``tendons`` on the as-built robot of ``context``
+    (its log hears of the steps), then greedy drops and smooth joins, then
+    orientation and route optimization (module docstring). With consolidation off
+    (``options.enabled`` false), the fitted routes as they are."""
+    rs = route_settings(context.problem, options)
+    search = _Search(context, options, rs, source)
+    routes, tensions = extracted_routes(context.problem, tendons, context.state, rs.clearance, source)
     first = search.solve(routes, search.start_ratios(routes, tensions))
     if first is None:
         raise ConvergenceError(f"the as-built robot of {source or 'the'} tendons cannot be solved")

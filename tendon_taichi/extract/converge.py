@@ -18,6 +18,7 @@ from ..errors import ConvergenceError
 from ..objective.settings import OptimizeSettings
 from ..tasks.pool import Deferred, Pool
 from .consolidation import Consolidation, Layout, _Search, _solve_task, route_settings
+from .context import Context
 from .front import PRECISION, Front, _key, _with_one_more
 from .protocol import IdealizedState
 from .realizable import RealizableResult, solve_realizable_poses
@@ -32,14 +33,13 @@ def pose_only_state(problem: Problem) -> IdealizedState:
     return replace(one, poses=[one] * problem.n_poses) if problem.n_poses > 1 else one
 
 
-def converged_error(fine: Problem, layout: Layout, state: IdealizedState, settings: OptimizeSettings,
-                    solver: str = "auto", start=None) -> RealizableResult:
-    """A layout's as-built robot on a finer mesh of the same body (``fine``; ``state``
-    from :func:`pose_only_state`): its routes, which do not depend on the mesh,
-    embedded in that mesh and their contractions solved again, from ``start`` (P, T)
-    or else the layout's own."""
-    start = np.atleast_2d(layout.realizable.ratios if start is None else start).reshape(fine.n_poses, -1)
-    return solve_realizable_poses(fine, layout.tendons(), state, settings, solver, start)
+def converged_error(fine: Context, layout: Layout, start=None) -> RealizableResult:
+    """A layout's as-built robot on a finer mesh of the same body (``fine``: that
+    mesh's problem, its state from :func:`pose_only_state`, the settings and the
+    solver): its routes, which do not depend on the mesh, embedded in that mesh and
+    their contractions solved again, from ``start`` (P, T) or else the layout's own."""
+    start = np.atleast_2d(layout.realizable.ratios if start is None else start).reshape(fine.problem.n_poses, -1)
+    return solve_realizable_poses(fine, layout.tendons(), start)
 
 
 class FineSolves:
@@ -52,7 +52,8 @@ class FineSolves:
 
     def __init__(self, fine: Problem, settings: OptimizeSettings, solver: str = "auto", workers: Pool | None = None):
         self.fine, self.state = fine, pose_only_state(fine)
-        self.task = partial(_fine_task, (fine, self.state, settings, solver))
+        self.context = Context(fine, self.state, settings, solver)
+        self.task = partial(_fine_task, self.context)
         self.workers = workers
         self._started: dict[int, tuple[Layout, Deferred]] = {}  # by id(layout); the layout keeps its id
 
@@ -76,10 +77,10 @@ def _mapped(workers: Pool | None, task: Callable, jobs: list) -> list:
     return workers.map(task, jobs) if workers is not None else [task(job) for job in jobs]
 
 
-def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: Problem, settings: OptimizeSettings,
-                   options: ConsolidationSettings, solver: str = "auto", log: Callable[[str], None] | None = None,
-                   workers: Pool | None = None, solved: FineSolves | None = None) -> dict[int, RealizableResult | None]:
-    """Each count's layouts on the finer mesh ``fine`` (:func:`converged_error`; None
+def converge_front(front: Front, context: Context, fine: Problem, options: ConsolidationSettings,
+                   solved: FineSolves | None = None) -> dict[int, RealizableResult | None]:
+    """Each count's layouts, searched on the as-built robot of ``context``, on the
+    finer mesh ``fine`` (:func:`converged_error`; None
     where none can be solved), in place: of the layout held and every other one
     finished for that count (``front.finished``), the least costly there (its pose
     error there squared plus its routes' shape cost; the one held on ties) becomes
@@ -89,14 +90,14 @@ def converge_front(front: Front, problem: Problem, state: IdealizedState, fine: 
     route (the best on ``problem``'s mesh from each start, :func:`_with_one_more`,
     where that keeps the front on ``problem``'s mesh monotone) is solved on
     ``fine`` as well and replaces the front's layout when it does better there.
-    ``workers`` share the solves of the finished layouts and the refits; ``solved``
-    (made with ``fine``, ``settings`` and ``solver``) holds those of the finished
-    layouts started while the front was searched."""
-    solved = solved or FineSolves(fine, settings, solver, workers)
+    The context's workers share the solves of the finished layouts and the refits;
+    ``solved`` (made with ``fine`` and the context's settings and solver) holds those
+    of the finished layouts started while the front was searched."""
+    problem, workers = context.problem, context.workers
+    solved = solved or FineSolves(fine, context.settings, context.solver, workers)
     fine_state = solved.state
-    search = _Search(problem, state, settings, solver, options, route_settings(problem, options), "front", log)
+    search = _Search(context, options, route_settings(problem, options), "front")
     search.out = Consolidation(next(iter(front.layouts.values())), 0, 0.0)
-    search.workers = workers
     size = problem.size
     task = solved.task
     there = _least_costly_there(search, front, solved)
@@ -163,9 +164,8 @@ def _refit(search: _Search, front: Front, there: dict[int, RealizableResult | No
     counts = [k for k in sorted(front.layouts) if there[k] is not None and front.layouts[k].routes]
     if not counts or not search.options.refine:
         return
-    fine_search = _Search(fine, fine_state, search.settings, search.solver, search.options, search.rs, "front",
-                          search.log)
-    fine_search.out, fine_search.workers = search.out, search.workers
+    fine_search = _Search(search.context.on(fine, fine_state), search.options, search.rs, "front")
+    fine_search.out = search.out
     search.log(f"front: the routes of {len(counts)} layout(s) optimized again on the finer mesh")
     starts = [Layout(front.layouts[k].routes, there[k], fine_search.cost(front.layouts[k].routes,
                                                                         there[k].pose_error_rel),
@@ -194,12 +194,11 @@ def _refit_task(spec: tuple, job: tuple[Layout]) -> tuple[Layout, dict]:
     return _refitted(search, job[0]), search.tally()
 
 
-def _fine_task(spec: tuple, job: tuple[Layout, np.ndarray | None]) -> RealizableResult | None:
-    """:func:`converged_error` (``spec``: the finer problem, its pose-only state, the
+def _fine_task(fine: Context, job: tuple[Layout, np.ndarray | None]) -> RealizableResult | None:
+    """:func:`converged_error` (``fine``: the finer problem, its pose-only state, the
     settings and the solver; ``job``: the layout and where to start), None where
     it cannot be solved."""
-    fine, fine_state, settings, solver = spec
     try:
-        return converged_error(fine, job[0], fine_state, settings, solver, job[1])
+        return converged_error(fine, job[0], job[1])
     except ConvergenceError:
         return None

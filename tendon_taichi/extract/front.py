@@ -92,14 +92,11 @@ from typing import Callable
 
 import numpy as np
 
-from ..body.problem import Problem
-from ..objective.settings import OptimizeSettings
 from ..probes import probe
-from ..tasks.pool import Pool
 from .consolidation import Candidate, Consolidation, Layout, _Search, positions, route_settings
-from .protocol import IdealizedState
+from .context import Context
 from .routes import Route, extend_route, keep_clear, resample
-from .settings import BEAM, ConsolidationSettings
+from .settings import ConsolidationSettings, FrontSettings
 
 #: the front joins routes whose ends are up to this far apart (x L; consolidation's --join-gap when
 #: larger): an extractor often finds only the two ends of a tendon whose middle the sparse
@@ -217,27 +214,25 @@ def _best(layouts: list[Layout], n: int, size: float) -> list[Layout]:
     return out
 
 
-def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSettings,
-                 consolidations: list[Consolidation], options: ConsolidationSettings, solver: str = "auto",
-                 max_tendons: int | None = None, beam: int = BEAM,
-                 log: Callable[[str], None] | None = None, workers: Pool | None = None,
-                 priors: list[PriorLayout] | None = None,
+def search_front(context: Context, consolidations: list[Consolidation], options: ConsolidationSettings,
+                 front_settings: FrontSettings = FrontSettings(), priors: list[PriorLayout] | None = None,
                  on_finished: Callable[[Layout], None] | None = None) -> Front:
-    """The front (module docstring) from the extractors' ``consolidations`` and the
-    ``priors`` (layouts from a prior design): per count 1 .. the most any seed has
-    (at most ``max_tendons``), the best layout found, finished. With consolidation off
-    (``options.enabled`` false), the seeds as they are, no search. ``workers``, a
-    pool of worker processes, share the independent solves and route
-    optimizations (the same front as without them); ``on_finished`` is called with
-    each layout as it is finished (``Front.on_finished``: ``design`` starts solving
-    it on the finer mesh, :class:`~.converge.FineSolves`)."""
+    """The front (module docstring) on the as-built robot of ``context`` from the
+    extractors' ``consolidations`` and the ``priors`` (layouts from a prior design):
+    per count 1 .. the most any seed has (at most ``front_settings.max_tendons``), the
+    best layout found, finished, the beam ``front_settings.beam`` wide. With
+    consolidation off (``options.enabled`` false), the seeds as they are, no search.
+    The context's workers, a pool of worker processes, share the independent solves
+    and route optimizations (the same front as without them); ``on_finished`` is
+    called with each layout as it is finished (``Front.on_finished``: ``design``
+    starts solving it on the finer mesh, :class:`~.converge.FineSolves`)."""
     t0 = time.perf_counter()
-    say = log or (lambda text: None)
+    say = context.say
+    beam, max_tendons = front_settings.beam, front_settings.max_tendons
     wide = replace(options, gap=max(options.gap, JOIN_GAP))
-    search = _Search(problem, state, settings, solver, wide, route_settings(problem, options), "front", log)
+    search = _Search(context, wide, route_settings(context.problem, options), "front")
     search.out = tally = Consolidation(consolidations[0].layout, 0, 0.0)
-    search.workers = workers
-    size = problem.size
+    size = context.problem.size
     by_count: dict[int, list[Layout]] = {}
     for c in consolidations:
         for lay in c.front.values():
@@ -310,7 +305,7 @@ def search_front(problem: Problem, state: IdealizedState, settings: OptimizeSett
                     f"{smaller.count}-tendon layout of {100 * smaller.error:.2f}% of L")
                 front.layouts[smaller.count] = smaller
         within = any(m.error <= options.budget for m in front.layouts.values())
-    _extend(search, front, pool, size, options, say)
+    _extend(search, front, pool, size, options)
     _descend(search, front, pool, size, say)
     front.evaluations, front.screened = tally.evaluations, tally.screened
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
@@ -570,13 +565,13 @@ def _continue_task(spec: tuple, job: tuple[Layout, int]) -> tuple[Layout, dict]:
     return _continued(search, *job), search.tally()
 
 
-def _extend(search: _Search, front: Front, pool: list[Route], size: float, options: ConsolidationSettings,
-            say: Callable[[str], None]) -> None:
+def _extend(search: _Search, front: Front, pool: list[Route], size: float, options: ConsolidationSettings) -> None:
     """The front's extension (module docstring), in place: up to one count above the
     first within the budget (where none is, the most tendons only), the better of
     each count's layout and its best extension (:func:`_extensions`, offered to
     the finer mesh); then the monotone repair (:func:`_repair`) above each count
     whose layout an extension replaced."""
+    say = search.log
     within = [k for k, lay in front.layouts.items() if lay.error <= options.budget]
     counts = [k for k in sorted(front.layouts) if k <= min(within) + 1] if within else sorted(front.layouts)[-1:]
     changed = set()

@@ -23,7 +23,6 @@ import numpy as np
 from ..body.cables import CableSet
 from ..body.mesh import Embedding
 from ..body.problem import Problem
-from ..objective.settings import OptimizeSettings
 from ..optimizer.gauss_newton import applies, first_step, gauss_newton
 from ..optimizer.gauss_newton import target_jacobian  # noqa: F401  (its import path before it moved)
 from ..optimizer.homotopy import RunCallbacks, run_stage
@@ -31,6 +30,7 @@ from ..optimizer.soft_ik import SoftIK, pose_errors
 from ..physics.model import Model
 from ..probes import probe
 from ..solve.newton import NewtonSolver
+from .context import Context
 from .protocol import IdealizedState, Tendon
 
 
@@ -75,8 +75,9 @@ def tendon_cables(problem: Problem, tendons: list[Tendon], hint: np.ndarray | No
         base += k
     a0 = np.array([t.length for t in tendons])
     return CableSet(Embedding(np.concatenate(tri).astype(np.int64), np.concatenate(bary)), np.concatenate(segs),
-                    np.array(start, dtype=np.int64), a0, np.full(len(tendons), problem.scene.fibers.stiffness),
-                    problem.scene.tendons.friction)
+                    np.array(start, dtype=np.int64), a0,
+                    stiffness=np.full(len(tendons), problem.scene.fibers.stiffness),
+                    friction=problem.scene.tendons.friction)
 
 
 def warm_ratios(problem: Problem, tendons: list[Tendon], state: IdealizedState,
@@ -97,36 +98,36 @@ def warm_ratios(problem: Problem, tendons: list[Tendon], state: IdealizedState,
     return np.clip(np.array(out), -fs.max_payout, fs.max_contraction)
 
 
-def solve_realizable_poses(problem: Problem, tendons: list[Tendon], state: IdealizedState,
-                           settings: OptimizeSettings, solver: str = "auto", ratios=None,
-                           positions=None) -> RealizableResult:
-    """The realizable robot in every target pose: one layout, its tendon contractions
+def solve_realizable_poses(context: Context, tendons: list[Tendon], ratios=None, positions=None) -> RealizableResult:
+    """The realizable robot of ``context`` (its problem, idealized state, settings and
+    solver) in every target pose: one layout, its tendon contractions
     re-solved per pose (warm started from ``ratios`` (P, T) c / L0 where given, else
     from each tendon's tension in that pose; its equilibria from ``positions``, each
     pose's (n, 2), where given, else from rest).
     With several poses the result's pose errors cover every pose's targets,
     ``contraction``, ``ratios`` and ``tau`` are (P, T), ``x`` is the first pose's
     and ``poses`` holds each pose's result."""
+    problem = context.problem
     if ratios is not None:
         ratios = np.asarray(ratios, dtype=float).reshape(problem.n_poses, len(tendons))
     warm = [None] * problem.n_poses if positions is None else list(positions)
     if problem.n_poses == 1:
-        return solve_realizable(problem, tendons, state, settings, solver, start=None if ratios is None else ratios[0],
-                                positions=warm[0])
+        return solve_realizable(context, tendons, start=None if ratios is None else ratios[0], positions=warm[0])
     t0 = time.perf_counter()
     res = []
-    for i, st in enumerate(state.poses):
+    for i, st in enumerate(context.state.poses):
         tensions = [pose_tension(st, t) for t in tendons]
-        res.append(solve_realizable(problem.pose(i), tendons, st, settings, solver, tensions,
-                                    None if ratios is None else ratios[i], warm[i]))
+        res.append(solve_realizable(context.on(problem.pose(i), st), tendons, tensions,
+                                    start=None if ratios is None else ratios[i], positions=warm[i]))
     err = np.array([r.pose_error for r in res])
     pe = float(np.sqrt((err ** 2).sum()))
     shape = (len(res), len(tendons))
     return RealizableResult(np.array([r.contraction for r in res]).reshape(shape),
                             np.array([r.ratios for r in res]).reshape(shape),
-                            np.array([r.tau for r in res]).reshape(shape), res[0].x, pe, pe / problem.size,
-                            max(r.pose_error_max for r in res), sum(r.iterations for r in res),
-                            sum(r.evaluations for r in res), time.perf_counter() - t0, res)
+                            np.array([r.tau for r in res]).reshape(shape), res[0].x, pe,
+                            pose_error_rel=pe / problem.size, pose_error_max=max(r.pose_error_max for r in res),
+                            iterations=sum(r.iterations for r in res), evaluations=sum(r.evaluations for r in res),
+                            time_s=time.perf_counter() - t0, poses=res)
 
 
 def pose_tension(state: IdealizedState, tendon: Tendon) -> float:
@@ -136,38 +137,40 @@ def pose_tension(state: IdealizedState, tendon: Tendon) -> float:
 
 
 @probe()
-def solve_realizable(problem: Problem, tendons: list[Tendon], state: IdealizedState,
-                     settings: OptimizeSettings, solver: str = "auto", tensions=None,
-                     start=None, positions=None) -> RealizableResult:
-    """Solve the realizable robot's tendon contractions for the problem's targets
-    (one pose), warm started from ``start`` (T,) c / L0, or else :func:`warm_ratios`,
-    its equilibria from ``positions`` (n, 2) where given, else from rest."""
+def solve_realizable(context: Context, tendons: list[Tendon], tensions=None, start=None,
+                     positions=None) -> RealizableResult:
+    """Solve the realizable robot's tendon contractions for the targets of the
+    context's problem (one pose), warm started from ``start`` (T,) c / L0, or else
+    :func:`warm_ratios` (from ``tensions`` (T,) N where given), its equilibria from
+    ``positions`` (n, 2) where given, else from rest."""
     t0 = time.perf_counter()
+    problem, state, settings, solver = context.problem, context.state, context.settings, context.solver
     L = problem.size
     if not tendons:  # the bare body (it sags under gravity, if any)
         x = NewtonSolver(Model.from_problem(problem, cables=CableSet.empty()), solver).solve().x
         pe, worst, _ = pose_errors(problem, [x])
-        return RealizableResult(np.zeros(0), np.zeros(0), np.zeros(0), x, pe, pe / L, worst,
-                                0, 0, time.perf_counter() - t0)
+        return RealizableResult(np.zeros(0), np.zeros(0), np.zeros(0), x, pe, pose_error_rel=pe / L,
+                                pose_error_max=worst, iterations=0, evaluations=0, time_s=time.perf_counter() - t0)
     ik = SoftIK(problem, settings, solver, cables=tendon_cables(problem, tendons))
     r0 = warm_ratios(problem, tendons, state, tensions) if start is None else np.asarray(start, dtype=float)
     warm = None if positions is None else [positions]
     st = gauss_newton(ik, r0, warm) if applies(ik) else run_stage(ik, 0, r0, RunCallbacks(), warm=warm)
     f = st.figures
-    return RealizableResult(st.ac, st.r, st.tau, st.x, f.pose_error, f.pose_error_rel, f.pose_error_max,
-                            st.iterations, st.evaluations, time.perf_counter() - t0)
+    return RealizableResult(st.ac, st.r, st.tau, st.x, f.pose_error, pose_error_rel=f.pose_error_rel,
+                            pose_error_max=f.pose_error_max, iterations=st.iterations, evaluations=st.evaluations,
+                            time_s=time.perf_counter() - t0)
 
 
-def predict_realizable(problem: Problem, tendons: list[Tendon], settings: OptimizeSettings, ratios,
-                       positions, solver: str = "auto") -> tuple[float, np.ndarray]:
-    """One Gauss-Newton step of the realizable soft IK
+def predict_realizable(context: Context, tendons: list[Tendon], ratios, positions) -> tuple[float, np.ndarray]:
+    """One Gauss-Newton step of the realizable soft IK of ``context`` (its problem,
+    settings and solver)
     (:func:`~tendon_taichi.optimizer.gauss_newton.first_step`): the equilibrium at
     ``ratios`` (P, T) c / L0, warm started from ``positions`` (P, n, 2) m (those of a
     nearby layout), its target Jacobian (:func:`target_jacobian`), and the bounded
     linear least-squares step of the pose + contraction objective. Returns the predicted
     pose error (fraction of L, over every pose) and the ratios (P, T) it predicts
     them at. Raises ConvergenceError when an equilibrium cannot be solved."""
-    ik = SoftIK(problem, settings, solver, cables=tendon_cables(problem, tendons))
+    ik = SoftIK(context.problem, context.settings, context.solver, cables=tendon_cables(context.problem, tendons))
     for ps, x in zip(ik.poses, positions):
         ps.model.set_positions(x)
     return first_step(ik, ik.split(ratios).ravel())

@@ -85,8 +85,8 @@ class Route:
 
     def tendon(self) -> Tendon:
         """The route as a tendon of the realizable robot (waypoints off the lattice)."""
-        return Tendon(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), self.waypoints,
-                      self.tension, self.tension_std, self.contraction, control=self.control.copy())
+        return Tendon(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), self.waypoints, self.tension,
+                      self.tension_std, contraction=self.contraction, control=self.control.copy())
 
 
 def resample(points: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -48,6 +48,7 @@ from ..optimizer.soft_ik import SoftIK
 from ..physics.capstan import perp
 from ..physics.waypoints import rest_point_gradient
 from ..probes import probe
+from .context import Context
 from .realizable import tendon_cables
 from .routes import Route, polyline_length
 
@@ -291,15 +292,15 @@ class RoutedLayout:
 
 
 @probe()
-def optimize_routes(problem: Problem, routes: list[Route], ratios: np.ndarray, settings: OptimizeSettings,
-                    route_settings: RouteSettings, solver: str = "auto", positions=None,
-                    on_iteration=None) -> RoutedLayout:
-    """Minimize O subject to the clearance (module docstring) from ``routes`` and
-    ``ratios`` (P, T) by SLSQP, warm started from ``positions`` (each pose's
+def optimize_routes(context: Context, routes: list[Route], ratios: np.ndarray, route_settings: RouteSettings,
+                    positions=None, on_iteration=None) -> RoutedLayout:
+    """Minimize O subject to the clearance (module docstring) on the context's
+    problem, with its settings and solver (its state is not used), from ``routes``
+    and ``ratios`` (P, T) by SLSQP, warm started from ``positions`` (each pose's
     equilibrium, (n, 2)) where given; returns the best point evaluated that keeps the
     clearance (within ``CLEAR_TOL``), or the best of all where none does.
     ``on_iteration(k, objective)`` is called per iteration."""
-    obj = RouteObjective(problem, routes, settings, route_settings, solver)
+    obj = RouteObjective(context.problem, routes, context.settings, route_settings, context.solver)
     obj.positions = None if positions is None else [np.asarray(x) for x in positions]
     z0 = obj.pack(routes, ratios)
     best = {"f": np.inf, "z": z0}  # the best point that keeps the clearance ...
@@ -350,5 +351,5 @@ def optimize_routes(problem: Problem, routes: list[Route], ratios: np.ndarray, s
                       callback=callback, options={"maxiter": route_settings.iterations, "ftol": 1e-12})
     found = best if np.isfinite(best["f"]) else lowest
     out_routes, out_ratios = obj.unpack(found["z"])
-    return RoutedLayout(out_routes, out_ratios, float(f_start), float(found["f"]), obj.evaluations,
-                        str(res.message))
+    return RoutedLayout(out_routes, out_ratios, objective_start=float(f_start), objective=float(found["f"]),
+                        evaluations=obj.evaluations, message=str(res.message))

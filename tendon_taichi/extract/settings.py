@@ -3,7 +3,7 @@ line reads them without loading the solvers)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 #: defaults (fractions of the body size L)
 TOLERANCE = 1.0e-3
@@ -49,3 +49,18 @@ class ConsolidationSettings:
     @property
     def enabled(self) -> bool:
         return self.tolerance >= 0.0
+
+
+@dataclass(frozen=True)
+class FrontSettings:
+    """The count/error front's search: ``beam``, the layouts its beam search keeps
+    per tendon count; ``converge``, whether each entry is solved again on the next
+    finer mesh; ``max_tendons``, the most tendons a layout may have (None: no limit)."""
+
+    beam: int = BEAM
+    converge: bool = True
+    max_tendons: int | None = None
+
+    def table(self) -> dict:
+        """The ``[front]`` table's settings (:data:`FRONT_DEFAULTS`' keys) as a dict."""
+        return {k: v for k, v in asdict(self).items() if k in FRONT_DEFAULTS}

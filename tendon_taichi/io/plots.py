@@ -94,7 +94,7 @@ def stages_figure(problem: Problem, panels: list[tuple], threshold: float, scale
     axes = fig.subplots(1, len(panels), squeeze=False)
     lc = None
     for ax, (title, x, tau, *pose) in zip(axes[0], panels):
-        lc = _axes_tensions(ax, problem.pose(pose[0] if pose else 0), x, tau, threshold, scale, title)
+        lc = _axes_tensions(ax, problem.pose(pose[0] if pose else 0), x, tau, threshold, scale=scale, title=title)
     axes[0][0].legend(loc="lower left", fontsize=7)
     if lc is not None:
         fig.colorbar(lc, ax=list(axes[0]), shrink=0.8, label="fiber tension (N)")
@@ -114,9 +114,9 @@ def compare_figure(extraction):
     fig = new_figure(figsize=(4.2 * (1 + len(ok)), 4.0))
     axes = fig.subplots(1, 1 + len(ok), squeeze=False)
     scale = max(float(st.tau.max()), 1e-9)
-    lc = _axes_tensions(axes[0][0], p, st.x, st.tau, st.active_threshold, scale / 2.0,
-                        f"idealized (stage {extraction.stage}): {int(st.active.sum())} active, "
-                        f"{100 * extraction.idealized_pose_error / p.size:.2f}% pose")
+    lc = _axes_tensions(axes[0][0], p, st.x, st.tau, st.active_threshold, scale=scale / 2.0,
+                        title=f"idealized (stage {extraction.stage}): {int(st.active.sum())} active, "
+                              f"{100 * extraction.idealized_pose_error / p.size:.2f}% pose")
     T = p.mesh.triangles
     colors = palette()
     for ax, r in zip(axes[0][1:], ok):
@@ -286,21 +286,22 @@ def sweep_figure(result: dict):
     return fig
 
 
-def plot_story(path: str | Path, problem: Problem, planted: dict | None, stage0, final, extractor,
-               threshold: float, scale: float) -> Path:
+def plot_story(path: str | Path, problem: Problem, planted: dict | None, stage0, final, extractor) -> Path:
     """:func:`story_figure` as a PNG."""
-    return save_png(story_figure(problem, planted, stage0, final, extractor, threshold, scale), path, 110)
+    return save_png(story_figure(problem, planted, stage0, final, extractor), path, 110)
 
 
-def story_figure(problem: Problem, planted: dict | None, stage0, final, extractor, threshold: float,
-                 scale: float):
+def story_figure(problem: Problem, planted: dict | None, stage0, final, extractor):
     """The method in five panels, for a README: the planted tendons on their
     equilibrium (``planted``: a layout dict of :mod:`~tendon_taichi.planted`, or
     None), stage 0 (unregularized soft IK) and the final stage (``(x, tau,
     figures)`` each) as fiber tensions, the designed routes at rest, and their
     as-built robot (``extractor``: anything with a ``name``, ``metrics``,
     ``tendons`` and ``realizable``, e.g. an
-    :class:`~tendon_taichi.apps.extract.ExtractorResult`)."""
+    :class:`~tendon_taichi.apps.extract.ExtractorResult`). Fibers are coloured by
+    tension as the problem's optimize settings scale it, the active ones marked."""
+    st = problem.scene.optimize
+    threshold, scale = st.active_threshold * st.tension_scale, st.tension_scale
     fig = new_figure(figsize=(19, 4.0))
     axes = fig.subplots(1, 5)
     T = problem.mesh.triangles
@@ -322,9 +323,9 @@ def story_figure(problem: Problem, planted: dict | None, stage0, final, extracto
         frame(ax, None, "1. the body and its goals")
     for ax, (x, tau, f), title in ((axes[1], stage0, "2. unregularized soft IK (stage 0)"),
                                    (axes[2], final, "3. L0 homotopy + strand terms (final)")):
-        _axes_tensions(ax, pose, x, tau, threshold, scale,
-                       f"{title}\n{f.active_fibers} active fibers, {100 * f.active_length:.1f} cm, "
-                       f"pose {100 * f.pose_error_rel:.2f}% of L")
+        _axes_tensions(ax, pose, x, tau, threshold, scale=scale,
+                       title=f"{title}\n{f.active_fibers} active fibers, {100 * f.active_length:.1f} cm, "
+                             f"pose {100 * f.pose_error_rel:.2f}% of L")
     ax = axes[3]
     m = extractor.metrics
     frame(ax, None, f"4. routes ({extractor.name}): {m['count']} tendons, "

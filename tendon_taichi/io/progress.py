@@ -45,9 +45,9 @@ class Progress:
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress as Bars, TextColumn,
                                        TimeElapsedColumn, TimeRemainingColumn)
 
-            self._bars = Bars(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                              TextColumn("{task.fields[info]}"), TimeElapsedColumn(), TimeRemainingColumn(),
-                              console=Console(file=self.stream), transient=True)
+            columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                       TextColumn("{task.fields[info]}"), TimeElapsedColumn(), TimeRemainingColumn())
+            self._bars = Bars(*columns, console=Console(file=self.stream), transient=True)
             self._bars.start()
             _active.append(self)
         self._tasks[key] = self._bars.add_task(description, total=total, info="")

@@ -147,11 +147,12 @@ class Recorder:
         self.rec.send_chunks(chunks)
         self.rec.flush()
 
-    def iteration(self, step: int, stage: int, k: float | None, figures, xs: np.ndarray,
-                  taus: np.ndarray, local: int = 0, force: bool = False) -> None:
+    def iteration(self, step: int, state, local: int = 0, force: bool = False) -> None:
         """Log one L-BFGS-B iteration (``step`` counts over the whole run, ``local``
-        within its stage, from 1) with the per-pose positions ``xs`` (P, n, 2) and
+        within its stage, from 1): ``state``, an iterate or a finished stage, with its
+        ``stage``, ``k``, ``figures``, per-pose positions ``xs`` (P, n, 2) and
         tensions ``taus`` (P, C); ``force`` logs the geometry whatever ``local``."""
+        stage, k, figures, xs, taus = state.stage, state.k, state.figures, state.xs, state.taus
         scalars = {**{f"/metrics/objective/{name}": value for name, value in figures.objective.items()},
                    "/metrics/figures/pose_error_rel": figures.pose_error_rel,
                    "/metrics/figures/active_fibers": figures.active_fibers,
@@ -266,7 +267,8 @@ class RecordedRun:
         fixed = a["fixed"].astype(bool)
         check_built(scene.name, int(self.meta["resolution"]), int(2 * (~fixed).sum()), fibers.n_fibers)
         return Problem(scene, int(self.meta["resolution"]), mesh, fixed, fibers,
-                       Embedding(a["target_tri"].astype(np.int64), a["target_bary"]), a["target_goal"])
+                       target=Embedding(a["target_tri"].astype(np.int64), a["target_bary"]),
+                       target_goal=a["target_goal"])
 
 
 def _whole_frames(path: Path) -> tuple[int, bool]:
@@ -392,7 +394,7 @@ def read_recording(path: str | Path) -> RecordedRun:
         why = _stage_fault(st, arrays)
         if why:
             raise RecordingError(f"'{path}' is damaged: stage {i}'s {why}")
-    return RecordedRun(path, meta, scene, arrays, done, truncated)
+    return RecordedRun(path, meta, scene, arrays, done, truncated=truncated)
 
 
 def _stage_fault(st: RecordedStage, arrays: dict) -> str | None:

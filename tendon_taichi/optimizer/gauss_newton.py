@@ -116,7 +116,7 @@ class _Point:
             lo, hi = bounds
             if radius is not None:
                 lo, hi = np.maximum(lo, r[i] - radius), np.minimum(hi, r[i] + radius)
-            d[i] = step(res, A, r[i], self.w, lo, hi)
+            d[i] = step(res, A, r[i], self.w, lo=lo, hi=hi)
             lin, now = res + A @ d[i], r[i] + d[i]
             predicted += float(np.dot(lin, lin)) + self.w * self.w * float(np.dot(now, now))
         return d.ravel(), self.value - predicted
@@ -182,5 +182,5 @@ def gauss_newton(ik: SoftIK, r_start: np.ndarray, warm: list[np.ndarray] | None 
             message = "no decrease near the point"
             break
     fig, xs, taus = final_state(ik, now.r, warm)
-    return StageResult(0, None, iterations, evaluations, time.perf_counter() - t0, fig, now.r, now.r * ik.a0,
-                       union_tension(taus)[0], xs, taus, message)
+    return StageResult(0, None, iterations, evaluations, time.perf_counter() - t0, figures=fig, r=now.r,
+                       ac=now.r * ik.a0, tau=union_tension(taus)[0], xs=xs, taus=taus, message=message)

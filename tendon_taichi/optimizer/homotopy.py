@@ -124,7 +124,7 @@ def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbac
         xs, taus = ik.state()
         history.append((ik.last_value(), active_set(union_tension(taus)[0], s).tobytes()))
         for cb in callbacks.on_iteration:
-            cb(Iterate(stage, k, len(history), fig, xs, taus))
+            cb(Iterate(stage, k, len(history), fig, xs, taus=taus))
         if settled(history, stage, s):
             raise StopIteration
 
@@ -135,8 +135,8 @@ def run_stage(ik: SoftIK, stage: int, r_start: np.ndarray, callbacks: RunCallbac
     r = np.clip(res.x, -fs.max_payout, fs.max_contraction)
     fig, xs, taus = final_state(ik, r, warm)
     message = "settled" if res.status == 99 or "StopIteration" in str(res.message) else str(res.message)
-    out = StageResult(stage, k, int(res.nit), ik.evaluations - ev0, time.perf_counter() - t0, fig,
-                      r, r * ik.a0, union_tension(taus)[0], xs, taus, message)
+    out = StageResult(stage, k, int(res.nit), ik.evaluations - ev0, time.perf_counter() - t0, figures=fig,
+                      r=r, ac=r * ik.a0, tau=union_tension(taus)[0], xs=xs, taus=taus, message=message)
     for cb in callbacks.on_stage:
         cb(out)
     return out

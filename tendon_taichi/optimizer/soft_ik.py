@@ -175,8 +175,11 @@ class PoseSolve:
     def adjoint(self, rhs: np.ndarray) -> np.ndarray:
         """lambda = J^-T dO/dx, J the equilibrium's Jacobian (the Hessian H, plus the
         capstan term with friction), warm started from the last one (iterative backends)."""
-        lam = solve_jacobian(self.linear, self.model.friction_jacobian(), rhs, ADJOINT_TOL, transpose=True,
-                             warm=self.lambda_warm)
+        fj = self.model.friction_jacobian()
+        if fj is None:
+            lam = self.linear.solve(rhs, tol=ADJOINT_TOL, warm=self.lambda_warm)
+        else:
+            lam = solve_jacobian(self.linear, fj, rhs, ADJOINT_TOL, transpose=True)
         self.lambda_warm = True
         return lam
 
@@ -346,8 +349,8 @@ class SoftIK:
         tau = union_tension(taus)[0]
         pe, worst, rows = pose_errors(p, xs)
         active = active_set(tau, self.settings)
-        return Figures(pe, pe / p.size, worst, int(active.sum()),
-                       float(self.a0[:self.n_cables][active].sum()), float(tau.max()), dict(ev.terms), rows)
+        return Figures(pe, pe / p.size, worst, int(active.sum()), float(self.a0[:self.n_cables][active].sum()),
+                       tau_max=float(tau.max()), objective=dict(ev.terms), poses=rows)
 
     def tensions(self) -> np.ndarray:
         """Per-pose tensions (P, C) of the last evaluated point, N."""

@@ -15,9 +15,9 @@ active length is at most twice the planted one; it meets the route rule when
 its worst capstan is at least the planted tendons' minus 0.05 and it has no
 more kinks than they have.
 
-Cases are independent and described by plain data (:func:`run_case` takes a
-path, a level and settings, and returns a JSON-able dict), so that a sweep
-engine can run them as separate tasks.
+Cases are independent and described by data that pickles (:func:`run_case`
+takes the case, its scene, a level and the design's settings, and returns a
+JSON-able dict), so that a sweep engine can run them as separate tasks.
 """
 
 from __future__ import annotations
@@ -27,25 +27,26 @@ import dataclasses
 import json
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from ..apps.case import STOP, worker_setup
+from ..apps.case import STOP, CaseSettings, worker_setup
 from ..apps.case import run_case as run_one
 from ..apps.provenance import result_provenance
 from ..body.problem import Problem
-from ..body.scene import load_scene, with_overrides
+from ..body.scene import Scene, load_scene, with_overrides
 from ..errors import ConvergenceError, InputError, Stopped
 from ..extract.consolidation import ConsolidationSettings
+from ..extract.context import Context
 from ..extract.plugins import available_extractors
 from ..extract.protocol import IdealizedState, Tendon, turn_angles
 from ..extract.realizable import solve_realizable_poses
-from ..extract.settings import FRONT_DEFAULTS, front_id
+from ..extract.settings import FrontSettings, front_id
 from ..files import atomic_path, file_stem, write_json
 from ..io.progress import Progress
-from ..tasks.engine import Task, case_id, run_tasks
+from ..tasks.engine import Cluster, Task, case_id, run_tasks
 from .gallery import plot_gallery
 
 #: pass criteria (the issue's "how it is shown")
@@ -123,7 +124,7 @@ def planted_figures(problem: Problem, layout: dict, solver: str = "auto") -> dic
     if problem.n_poses > 1:
         state.poses = [state] * problem.n_poses
     try:
-        real = solve_realizable_poses(problem, tendons, state, problem.scene.optimize, solver,
+        real = solve_realizable_poses(Context(problem, state, problem.scene.optimize, solver), tendons,
                                       planted_ratios(layout, problem.n_poses))
         error = real.pose_error_rel
     except ConvergenceError:
@@ -133,27 +134,43 @@ def planted_figures(problem: Problem, layout: dict, solver: str = "auto") -> dic
             "planted_total_turning": float(sum(theta)), "planted_as_built_error_rel": error}
 
 
-def run_case(scene_path: str | Path, layout: dict, level: int, out_dir: str | Path,
-             overrides: dict | None = None, extractors: list[str] | None = None,
-             solver: str = "auto", consolidation: dict | None = None, tendons: dict | None = None,
-             front: dict | None = None, routes_from: str | None = None) -> dict:
-    """Design one planted case (``consolidation``: the fields of
-    :class:`~tendon_taichi.extract.consolidation.ConsolidationSettings`; ``tendons``:
-    [tendons] settings to replace; ``front``: ``beam`` and ``converge`` of the
-    count/error front, default if absent; ``routes_from``: a prior design whose
-    front the front searches from too); its files go to ``out_dir/NAME-rLEVEL/``
-    (:func:`case_folder`). Returns the case's figures."""
-    t0 = time.perf_counter()
-    scene = load_scene(str(scene_path))
+@dataclass(frozen=True)
+class SuiteSettings:
+    """What a suite run changes and how its cases are designed: the ``cases`` to run
+    (None: all), ``overrides`` of every case's [optimize] settings and ``tendons``
+    of its [tendons] ones (None values are left out), the linear ``solver``, the
+    ``extractors`` (None: every installed one), ``consolidation`` after each (None:
+    the defaults), the ``front``'s search, and ``priors``: per case name, a prior
+    design (``design.json``) whose front that case's front searches from too."""
+
+    cases: tuple[str, ...] | None = None
+    overrides: dict = field(default_factory=dict)
+    tendons: dict = field(default_factory=dict)
+    solver: str = "auto"
+    extractors: tuple[str, ...] | None = None
+    consolidation: ConsolidationSettings | None = None
+    front: FrontSettings = FrontSettings()
+    priors: dict[str, Path] | None = None
+
+
+def case_scene(case: Case, overrides: dict, tendons: dict) -> Scene:
+    """The case's scene with the [optimize] ``overrides`` and the [tendons] settings
+    ``tendons`` applied."""
+    scene = load_scene(str(case.scene_path))
     if overrides:
         scene = with_overrides(scene, overrides)
-    scene = scene.with_tendons(**(tendons or {}))
-    case = Case(Path(scene_path).stem, Path(scene_path), layout)
-    name, planted_count, planted_length = case.name, case.planted_count, case.planted_length
+    return scene.with_tendons(**tendons)
+
+
+def run_case(case: Case, scene: Scene, level: int, out_dir: str | Path, settings: CaseSettings) -> dict:
+    """Design one planted ``case`` on its ``scene`` (:func:`case_scene`) as
+    ``settings`` say; its files go to ``out_dir/NAME-rLEVEL/`` (:func:`case_folder`).
+    Returns the case's figures."""
+    t0 = time.perf_counter()
+    layout, name, planted_count, planted_length = case.layout, case.name, case.planted_count, case.planted_length
     folder = case_folder(out_dir, name, level)
-    cons = ConsolidationSettings(**(consolidation or {}))
-    d = run_one(scene, level, folder, solver, extractors, cons, budget=cons.budget or 0.005, routes_from=routes_from,
-                **(front or {}))
+    solver, routes_from = settings.solver, settings.routes_from
+    d = run_one(scene, level, folder, settings)
     run, summary = d.run, d.summary
     final = run.summary["final"]
     length_ratio = final["active_length"] / planted_length if planted_length > 0 else float("inf")
@@ -257,43 +274,39 @@ def _describe(row: dict) -> str:
             f"{row['planted_capstan_worst']:.2f}), {row['kinks']} kinks, {'pass' if row['passed'] else 'miss'}")
 
 
-def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides: dict | None = None,
-              extractors: list[str] | None = None, solver: str = "auto", cases: list[str] | None = None,
-              progress=None, workers: int | None = None, scheduler: str | None = None,
-              consolidation=None, tendons: dict | None = None, front: dict | None = None,
-              priors: dict[str, Path] | None = None) -> dict:
-    """Run every case of a suite (or the named ``cases``) as tasks of
-    :func:`tendon_taichi.tasks.engine.run_tasks` (``workers``: local Dask cluster size,
-    None: one per core, 0: in this process; ``scheduler``: an existing cluster).
-    ``consolidation`` (:class:`~tendon_taichi.extract.consolidation.ConsolidationSettings`,
-    default settings if None) follows every extractor; ``front``: ``beam`` and
-    ``converge`` of the count/error front (the defaults of ``design`` if absent);
-    ``priors``: per case name, a prior design (``design.json``) whose front that
-    case's front searches from too (``design --routes-from``). Outputs are
-    rewritten after each case, and a re-run reuses the finished ones
+def run_suite(directory: str | Path, level: int, out_dir: str | Path, settings: SuiteSettings = SuiteSettings(),
+              cluster: Cluster = Cluster(), progress=None) -> dict:
+    """Run every case of a suite (``settings.cases``: only those) as tasks of
+    :func:`tendon_taichi.tasks.engine.run_tasks` on ``cluster`` (its ``workers``:
+    local Dask cluster size, None: one per core, 0: in this process; ``scheduler``:
+    an existing cluster), each designed as ``settings`` say. Outputs are rewritten
+    after each case, and a re-run reuses the finished ones
     (``out_dir/cases/<id>/result.json``), so an interrupted run keeps what it did."""
     suite = load_suite(directory)
-    if cases:
-        unknown = set(cases) - {c.name for c in suite}
+    if settings.cases:
+        unknown = set(settings.cases) - {c.name for c in suite}
         if unknown:
             raise InputError(f"no such case in the suite: {', '.join(sorted(unknown))}")
-        suite = [c for c in suite if c.name in cases]
-    overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
-    tendons = {k: v for k, v in (tendons or {}).items() if v is not None}
+        suite = [c for c in suite if c.name in settings.cases]
+    overrides = {k: v for k, v in (settings.overrides or {}).items() if v is not None}
+    tendons = {k: v for k, v in (settings.tendons or {}).items() if v is not None}
     for case in suite:  # bad scene files or settings stop the run before it starts
         with_overrides(load_scene(str(case.scene_path)), overrides).with_tendons(**tendons)
-    names = sorted(extractors or available_extractors())
-    cons = dataclasses.asdict(consolidation or ConsolidationSettings())
-    search = {**FRONT_DEFAULTS, **(front or {})}
+    names = sorted(settings.extractors or available_extractors())
+    solver, consolidation = settings.solver, settings.consolidation or ConsolidationSettings()
+    cons = dataclasses.asdict(consolidation)
+    search = settings.front.table()
+    design = CaseSettings(solver=solver, extractors=tuple(names), consolidation=consolidation,
+                          budget=consolidation.budget or 0.005, front=settings.front)
     out_dir = Path(out_dir)
-    priors = priors or {}
+    priors = settings.priors or {}
     tasks = [Task(case_id({"kind": "planted-design", "scene": case.scene_path.read_text(), "layout": case.layout,
                            "level": level, "settings": overrides, "extractors": names, "solver": solver,
                            "consolidation": cons, "tendons": tendons, **front_id(search),
                            **({"routes_from": _prior_id(priors[case.name])} if case.name in priors else {})}),
                   case.name, run_case,
-                  (str(case.scene_path), case.layout, level, str(out_dir / "cases"), overrides, names, solver,
-                   cons, tendons, search, str(priors[case.name]) if case.name in priors else None))
+                  (case, case_scene(case, overrides, tendons), level, str(out_dir / "cases"),
+                   replace(design, routes_from=str(priors[case.name]) if case.name in priors else None)))
              for case in suite]
     by_name = {c.name: c for c in suite}
     result = {"suite": str(directory), "level": level, "settings": overrides, "consolidation": cons,
@@ -306,8 +319,8 @@ def run_suite(directory: str | Path, level: int, out_dir: str | Path, overrides:
         result["totals"] = totals(result["cases"])
         write_outputs(result, out_dir, suite)
 
-    report = run_tasks(tasks, out_dir / "cases", workers, scheduler, progress or Progress(), on_outcome, _describe,
-                       setup=worker_setup(), stop=STOP)
+    report = run_tasks(tasks, out_dir / "cases", replace(cluster, setup=worker_setup(), stop=STOP),
+                       progress or Progress(), on_outcome, describe=_describe)
     result["engine"] = report.engine
     if report.outcomes:
         write_outputs(result, out_dir, suite)

@@ -26,11 +26,12 @@ Each level runs as :func:`~tendon_taichi.planted.bench.run_suite` into
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from ..files import write_json
 from ..io.plots import new_figure, save_png
-from .bench import case_folder, load_suite, run_suite
+from .bench import SuiteSettings, case_folder, load_suite, run_suite
 
 #: the front's errors at several levels agree within this (x L) ...
 AGREE_ABS = 1e-3
@@ -41,8 +42,9 @@ AGREE_SLACK = 5e-4
 
 
 def run_levels(directory: str | Path, levels: list[int], out_dir: str | Path, coarse_to_fine: bool = True,
-               **kwargs) -> dict:
-    """The suite at each of ``levels`` (``kwargs`` as for ``run_suite``), from the
+               settings: SuiteSettings = SuiteSettings(), **kwargs) -> dict:
+    """The suite at each of ``levels`` (``settings`` and ``kwargs`` as for ``run_suite``;
+    its ``priors`` set here), from the
     coarsest up, each after the first searching from the one before's designs too
     (``coarse_to_fine``, module docstring); then the comparison
     (:func:`compare_levels`), written to ``out_dir/levels.json`` and
@@ -52,7 +54,7 @@ def run_levels(directory: str | Path, levels: list[int], out_dir: str | Path, co
     order = sorted(levels)
     for lv, before in zip(order, [None] + order[:-1]):
         priors = prior_designs(directory, out_dir / f"level{before}", before) if coarse_to_fine and before else None
-        runs[lv] = run_suite(directory, lv, out_dir / f"level{lv}", priors=priors, **kwargs)
+        runs[lv] = run_suite(directory, lv, out_dir / f"level{lv}", replace(settings, priors=priors), **kwargs)
     result = {**compare_levels(runs), "coarse_to_fine": coarse_to_fine}
     write_json(result, out_dir / "levels.json")
     save_png(fronts_figure(result), out_dir / "fronts.png", 90)

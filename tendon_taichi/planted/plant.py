@@ -208,8 +208,8 @@ def plant(scene: Scene | str, n_tendons: int, seed: int, level: int = 2,
         pose_goals = [np.array([[float(_fmt(v)) for v in g] for g in goals]) for goals in pose_goals]
         goals = pose_goals[0]
         name = planted_name(scene, n_tendons, seed, poses)
-        text = scene_text(scene, name, pose_goals,
-                          _header(scene, name, tendons, n_tendons, seed, level, disp.max() / L, ratios))
+        text = scene_text(scene, name, pose_goals, _header(scene, name, tendons, n_tendons, seed, level=level,
+                                                           disp_rel=disp.max() / L, ratios=ratios))
         parse_scene(text, origin=name, base_dir=None, default_name=name)  # it must load
         extra = {} if ratios is None else {"poses": [
             {"name": f"pose{q}", "contraction_ratios": ratios[q].tolist(),

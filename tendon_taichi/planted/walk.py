@@ -230,11 +230,11 @@ class Walker:
         target = rng.uniform(st.min_length, st.max_length) * self.r.L
         theta = self._heading(rng, p, others, sep, min(self.look, target))
         state = {"offset": 0.0, "lo": theta, "hi": theta, "turning": 0.0}
-        fwd = self._extend(rng, p, theta, target, others, sep, state)
+        fwd = self._extend(rng, p, theta, target, others, sep=sep, state=state)
         back = []
         if h * len(fwd) + 0.5 * h < target:
             state["offset"] = np.pi
-            back = self._extend(rng, p, theta + np.pi, target - h * len(fwd), others, sep, state)
+            back = self._extend(rng, p, theta + np.pi, target - h * len(fwd), others, sep=sep, state=state)
         if h * (len(fwd) + len(back)) < st.min_length * self.r.L - 1e-12:
             return None
         return np.array(back[::-1] + [p] + fwd)

@@ -174,12 +174,12 @@ class CGSolver(LinearSolver):
             if self.pre.stale:  # reset by a long solve just before, on the same prepared Hessian
                 self.pre.refresh()
                 m.prepare_hessian(self._project)
-            st = host_pcg(m, rhs, tol, self.max_iter, self.pre, warm)
+            st = host_pcg(m, rhs, tol, self.max_iter, self.pre, warm=warm)
             if st.indefinite_preconditioner or (not st.converged and not st.negative_curvature):
                 # an indefinite reference Hessian, or too far from it
                 self.pre.refresh(project=st.indefinite_preconditioner or self.pre.projected)
                 m.prepare_hessian(self._project)
-                st = host_pcg(m, None, tol, self.max_iter, self.pre, False)
+                st = host_pcg(m, None, tol, self.max_iter, self.pre, warm=False)
             if st.iterations > self.pre.refresh_iterations:
                 self.pre.reset()
         self.last = st

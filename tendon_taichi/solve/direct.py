@@ -367,7 +367,7 @@ class DirectSolver(LinearSolver):
             if tendons:
                 order = _fill_reducing_order(r, c, nf)
                 keys, pos = np.unique(order[c].astype(np.int64) * nf + order[r], return_inverse=True)
-            cache[key] = _ElementPattern(keep, r, c, order, keys, pos)
+            cache[key] = _ElementPattern(keep, r, c, order, keys, pos=pos)
         return cache[key]
 
     def _low_rank(self) -> tuple[np.ndarray, np.ndarray]:

@@ -25,16 +25,17 @@ MAX_ITERATIONS = 200
 
 
 def solve_jacobian(linear: LinearSolver, friction: FrictionJacobian | None, rhs: np.ndarray, tol: float,
-                   transpose: bool, warm: bool = False, prepare: bool = True) -> np.ndarray:
+                   transpose: bool, prepare: bool = True) -> np.ndarray:
     """y (n, 2) with ``J y = rhs`` (``transpose``: ``J^T y = rhs``) on the free DOFs,
     ``J = H + E`` at the model's current state (``friction`` None: ``J = H``, one
-    plain solve, ``warm`` as the backend takes it); ``tol`` relative to |rhs|.
+    plain solve, not warm started: a caller that wants that solves with ``linear``
+    itself); ``tol`` relative to |rhs|.
     ``prepare=False``: H as the backend last prepared it (its factorization or
     preconditioner, :meth:`~.linear.LinearSolver.resolve`), for another
     right-hand side at the same state. Raises ConvergenceError when GMRES does
     not reach it."""
     if friction is None:
-        return linear.solve(rhs, tol=tol, warm=warm) if prepare else linear.resolve(rhs, tol)
+        return linear.solve(rhs, tol=tol) if prepare else linear.resolve(rhs, tol)
     n2 = np.asarray(rhs).size
     mask = np.repeat(friction.pm.free[:, 0] > 0, 2)  # the free DOFs
     apply_E = friction.transpose_product if transpose else friction.product

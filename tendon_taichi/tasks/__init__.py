@@ -7,7 +7,7 @@ and what stops a run are its arguments."""
 from .._lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(__name__, {
-    ".engine": ("Task", "Outcome", "Report", "LineProgress", "case_id", "run_tasks", "execute", "connect",
+    ".engine": ("Task", "Cluster", "Outcome", "Report", "LineProgress", "case_id", "run_tasks", "execute", "connect",
                 "worker_startup"),
     ".pool": ("Pool",),
 })

@@ -12,12 +12,12 @@ runs a list of them:
   ``dask scheduler`` / ``dask worker``), which is left running;
 - or, with ``workers=0``, one after the other in this process (no Dask).
 
-The engine knows nothing of what the tasks compute: the caller passes a
-``setup`` function that every worker process runs once before its first task
+The engine knows nothing of what the tasks compute: the caller passes, in its
+:class:`Cluster`, a ``setup`` function that every worker process runs once before its first task
 (the application starts Taichi and compiles its kernels there, see
 :func:`tendon_taichi.apps.case.start_worker`), the exception types that
 ``stop`` the whole run when a task raises them (Ctrl-C inside an in-process
-case), and a ``progress`` reporter (:class:`LineProgress` by default).
+case), and to :func:`run_tasks` a ``progress`` reporter (:class:`LineProgress` by default).
 With a ``store`` folder, a finished case's result is kept in
 ``store/<id>/result.json`` and a later run reuses it (``reused``); a case that
 raises is reported with its ``error`` and the others go on (it is not stored,
@@ -63,6 +63,20 @@ class Task:
     label: str
     fn: Callable[..., dict]
     args: tuple = ()
+
+
+@dataclass(frozen=True)
+class Cluster:
+    """Where and how :func:`run_tasks` runs its tasks: on a local Dask cluster of
+    ``workers`` processes (None: one per core; 0: one after the other in this
+    process), or on the existing one at ``scheduler`` (``tcp://HOST:PORT``); every
+    worker process runs ``setup(threads)`` once before its first task, and a task
+    that raises one of the ``stop`` exception types stops the whole run."""
+
+    workers: int | None = None
+    scheduler: str | None = None
+    setup: Callable[[int | None], dict] | None = None
+    stop: tuple[type[BaseException], ...] = ()
 
 
 @dataclass
@@ -217,8 +231,8 @@ def _keep(store: Path | None, outcome: Outcome) -> None:
 
 
 def _outcome(task: Task, res: dict) -> Outcome:
-    return Outcome(task, res.get("value"), res.get("error"), False, res.get("time_s", 0.0), res.get("worker", ""),
-                   res.get("traceback"))
+    return Outcome(task, res.get("value"), res.get("error"), reused=False, time_s=res.get("time_s", 0.0),
+                   worker=res.get("worker", ""), traceback=res.get("traceback"))
 
 
 class LineProgress:
@@ -260,18 +274,15 @@ class _CaseLines:
                 f"elapsed {el:.0f} s, about {left:.0f} s left)")
 
 
-def run_tasks(tasks: list[Task], store: str | Path | None = None, workers: int | None = None,
-              scheduler: str | None = None, progress=None,
+def run_tasks(tasks: list[Task], store: str | Path | None = None, cluster: Cluster = Cluster(), progress=None,
               on_outcome: Callable[[Outcome], None] | None = None,
-              describe: Callable[[dict], str] | None = None,
-              setup: Callable[[int | None], dict] | None = None,
-              stop: tuple[type[BaseException], ...] = ()) -> Report:
-    """Run ``tasks`` (see the module docstring); ``on_outcome`` sees each outcome as
-    it arrives (write partial outputs there); ``describe(value)`` words a finished
-    case's line; ``progress``: a reporter like :class:`LineProgress` (the default),
-    or a function that prints one line; ``setup``: run once by each worker
-    process; ``stop``: exception types that stop the whole run. Returns every
-    outcome in task order."""
+              describe: Callable[[dict], str] | None = None) -> Report:
+    """Run ``tasks`` (see the module docstring) where ``cluster`` says, keeping
+    their results in ``store``; ``on_outcome`` sees each outcome as it arrives
+    (write partial outputs there); ``describe(value)`` words a finished case's line;
+    ``progress``: a reporter like :class:`LineProgress` (the default), or a function
+    that prints one line. Returns every outcome in task order."""
+    workers, scheduler, setup, stop = cluster.workers, cluster.scheduler, cluster.setup, cluster.stop
     if progress is None or not hasattr(progress, "advance"):
         progress = LineProgress(progress)
     if len({t.id for t in tasks}) != len(tasks):
@@ -285,7 +296,7 @@ def run_tasks(tasks: list[Task], store: str | Path | None = None, workers: int |
         if value is None:
             fresh.append(t)
         else:
-            kept.append(Outcome(t, value, None, True, value.pop("time_s_worker", 0.0), ""))
+            kept.append(Outcome(t, value, reused=True, time_s=value.pop("time_s_worker", 0.0)))
     line = _CaseLines(len(tasks), len(fresh), describe)
     progress.start(len(tasks))
 
