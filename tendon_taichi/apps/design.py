@@ -36,7 +36,7 @@ from ..io.drawing import write_svg
 from ..io.export import write_as_built
 from ..io.plots import load as load_pictures, plot_design, plot_front
 from ..io.progress import Progress
-from ..io.recording import rewrite
+from ..io.recording import RecordedRun, rewrite
 from ..physics import runtime
 from ..tasks.pool import Pool
 from .extract import Extraction, extract, frictionless_error, log_layout
@@ -205,7 +205,7 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
         check_reach(run, budget)
         for w in run.warnings:  # now, not only with the design: the search may take long
             progress.message(f"design: warning: {w}")
-        ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
+        ex, layout, summary = recommended(run.held, budget, max_tendons, extractors, consolidation, progress,
                                           plugin_timeout, beam, converge, pool, prior, min_capstan)
         summary["timing"]["optimize_s"] = run.summary["time_s"]
         summary["timing"]["workers"] = workers
@@ -244,16 +244,18 @@ def _rounded_up(x: float) -> float:
     return r
 
 
-def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int | None = None,
+def recommended(recording: str | Path | RecordedRun, budget: float = BUDGET, max_tendons: int | None = None,
                 extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
                 progress: Progress | None = None, plugin_timeout: float | None = None, beam: int = BEAM,
                 converge: bool = True, workers: Pool | None = None, prior: PriorDesign | None = None,
                 min_capstan: float = 0.0) -> tuple[Extraction, Layout, dict]:
-    """Every extractor on a recorded run's last stage, consolidated and routed, the
-    count/error front searched from all their routes (:func:`search_front`), each
-    front entry solved again on the next finer mesh (``converge``), and the layout
-    recommended (:func:`recommend`, with ``min_capstan``): the extraction, the layout and the summary
-    ``design.json`` holds (no file is written). ``workers`` (a pool of worker
+    """Every extractor on a recorded run's last stage (``recording``: its path, or the
+    run read or held in memory, as :func:`~.extract.extract` takes it), consolidated
+    and routed, the count/error front searched from all their routes
+    (:func:`search_front`), each front entry solved again on the next finer mesh
+    (``converge``), and the layout recommended (:func:`recommend`, with
+    ``min_capstan``): the extraction, the layout and the summary ``design.json``
+    holds (no file is written). ``workers`` (a pool of worker
     processes) share the consolidations and the front's independent pieces;
     ``prior``'s front layouts (:func:`~.priors.read_prior`) join the front's seeds."""
     t0 = time.perf_counter()

@@ -254,7 +254,7 @@ def frictionless_error(problem: Problem, tendons: list[Tendon], state: Idealized
     return solve_realizable_poses(bare, tendons, state, settings, solver, real.ratios).pose_error_rel
 
 
-def extract(path: str | Path, names: list[str] | None = None, stage: int | None = None,
+def extract(path: str | Path | RecordedRun, names: list[str] | None = None, stage: int | None = None,
             options: dict[str, dict] | None = None, solver: str = "recorded",
             metric_settings: MetricSettings | None = None, record: bool | str | Path = False,
             consolidation: ConsolidationSettings | None = None, on_wait=None,
@@ -269,11 +269,14 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     the viewer shows with the run (:func:`log_tendons`; ``on_wait`` is called if
     another process is writing; when that fails, the results are kept and
     ``record_error`` says why). ``workers`` (a pool of worker processes) share the
-    consolidations (the same results)."""
-    run = read_recording(path)
+    consolidations (the same results). ``path`` is the recording's path, or the
+    run already read (:func:`~tendon_taichi.io.recording.read_recording`) or handed
+    on in memory (:class:`~tendon_taichi.io.recording.HeldRun`: the file is not
+    read again)."""
+    run = path if isinstance(path, RecordedRun) else read_recording(path)
     target = record_target(run, record)
     if not run.stages:
-        raise InputError(f"'{path}' has no completed stage to extract from")
+        raise InputError(f"'{run.path}' has no completed stage to extract from")
     if stage is None:
         stage = len(run.stages) - 1
     if not 0 <= stage < len(run.stages):

@@ -17,7 +17,8 @@ from ..files import check_writable, file_stem
 from ..io.export import pose_arrays, write_export
 from ..io.plots import plot_stages
 from ..io.progress import Progress, active
-from ..io.recording import RecordedRun, Recorder, RecordingError, completed_chunks, read_recording
+from ..io.recording import (HeldRun, RecordedRun, Recorder, RecordingError, as_read, completed_chunks, held_stage,
+                            problem_tensors, read_recording)
 from ..objective.settings import settings_dict
 from ..optimizer.homotopy import RunCallbacks, StageResult, run_schedule
 from ..optimizer.soft_ik import Figures, Iterate, SoftIK, active_set
@@ -39,7 +40,8 @@ class Interrupted(Stopped):
 
 @dataclass
 class RunResult:
-    """A finished (or resumed) optimization."""
+    """A finished (or resumed) optimization; ``held``, the run as its recording
+    holds it, kept in memory (what ``design`` extracts from)."""
 
     problem: Problem
     stages: list[StageResult]
@@ -47,6 +49,7 @@ class RunResult:
     recording: Path
     export: Path | None
     warnings: list[str] = field(default_factory=list)
+    held: HeldRun | None = None
 
 
 def _summary(problem: Problem, solver: str, stages: list, recording: Path, export: Path | None,
@@ -101,6 +104,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
     t0 = time.perf_counter()
     progress = progress or active() or Progress(enabled=False)
     completed: list[StageResult] = []
+    held, header = [], None  # the completed stages and the run's metadata as the recording holds them
     if resume is not None:
         run = read_recording(resume)
         if not run.stages:
@@ -109,6 +113,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
         problem = run.problem()
         solver = run.meta.get("solver") or solver or "auto"
         completed = [_recorded_stage(rs, problem) for rs in run.stages]
+        held, header = list(run.stages), run.meta
         record = Path(record) if record is not None else Path(resume)
         meta = dict(run.meta)
     else:
@@ -143,6 +148,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
     def on_stage(st: StageResult):
         recorder.iteration(step[0], st.stage, st.k, st.figures, st.xs, st.taus, force=True)
         recorder.stage(st, step[0])
+        held.append(held_stage(st, step[0]))
         if tmp is not None:
             _promote(tmp)
         finished.append(st)
@@ -188,7 +194,9 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
                     settings.tension_scale)
         extra["png"] = str(png)
     summary = _summary(problem, solver, stages, record, export, t0, ik, extra)
-    return RunResult(problem, stages, summary, record, export, warnings)
+    kept = HeldRun(record, header or as_read(recorder.meta), problem.scene.source, problem_tensors(problem), held,
+                   built=problem)
+    return RunResult(problem, stages, summary, record, export, warnings, kept)
 
 
 def _check_resumable(run: RecordedRun, level: int | None, solver: str | None, scene: Scene | None) -> None:
