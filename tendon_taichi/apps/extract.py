@@ -25,6 +25,7 @@ from ..files import check_writable
 from ..io.recording import (TENDONS_OF, RecordedRun, RecordingError, chunk_at_stage, mesh_edges, read_recording,
                             rewrite, tendons_owner)
 from ..optimizer.soft_ik import state_solver
+from ..solve.linear import LinearSettings
 from ..physics.model import Model
 from ..tasks.pool import Pool
 
@@ -74,6 +75,7 @@ class Extraction:
     results: list[ExtractorResult]
     record: str | None = None  # the file the tendons were logged into
     record_error: str | None = None  # why the tendons could not be logged
+    solver: LinearSettings | None = None  # the linear backend the extractors' robots were solved with
 
     def as_json(self) -> dict:
         out = {"recording": str(self.run.path), "scene": self.run.meta.get("scene"),
@@ -259,7 +261,8 @@ def extract(path: str | Path | RecordedRun, names: list[str] | None = None, stag
             metric_settings: MetricSettings | None = None, record: bool | str | Path = False,
             consolidation: ConsolidationSettings | None = None, on_wait=None,
             plugin_timeout: float = PLUGIN_TIMEOUT, friction: float | None = None,
-            clearance: float | None = None, log=None, workers: Pool | None = None) -> Extraction:
+            clearance: float | None = None, log=None, workers: Pool | None = None,
+            factor_threads: int | None = None) -> Extraction:
     """Run extractors (default: every installed one, each for at most
     ``plugin_timeout`` s) on a recorded stage (default: the last completed), each
     followed by consolidation (default settings unless ``consolidation`` is
@@ -269,10 +272,11 @@ def extract(path: str | Path | RecordedRun, names: list[str] | None = None, stag
     the viewer shows with the run (:func:`log_tendons`; ``on_wait`` is called if
     another process is writing; when that fails, the results are kept and
     ``record_error`` says why). ``workers`` (a pool of worker processes) share the
-    consolidations (the same results). ``path`` is the recording's path, or the
-    run already read (:func:`~tendon_taichi.io.recording.read_recording`) or handed
-    on in memory (:class:`~tendon_taichi.io.recording.HeldRun`: the file is not
-    read again)."""
+    consolidations (the same results); every factorization, theirs too, runs on
+    ``factor_threads`` (None: each process's own). ``path`` is the recording's
+    path, or the run already read
+    (:func:`~tendon_taichi.io.recording.read_recording`) or handed on in memory
+    (:class:`~tendon_taichi.io.recording.HeldRun`: the file is not read again)."""
     run = path if isinstance(path, RecordedRun) else read_recording(path)
     target = record_target(run, record)
     if not run.stages:
@@ -286,7 +290,7 @@ def extract(path: str | Path | RecordedRun, names: list[str] | None = None, stag
     unknown_opts = set(options) - set(names)
     if unknown_opts:
         raise InputError(f"options given for extractor(s) not run: {', '.join(sorted(unknown_opts))}")
-    solver = run.meta.get("solver", "auto") if solver == "recorded" else solver
+    solver = LinearSettings(run.meta.get("solver", "auto") if solver == "recorded" else solver, factor_threads)
     problem = run.problem().with_tendons(friction=friction, clearance=clearance)
     state = idealized_state(run, problem, stage, solver)
     ms = metric_settings or MetricSettings(mu=problem.scene.tendons.friction)
@@ -297,7 +301,7 @@ def extract(path: str | Path | RecordedRun, names: list[str] | None = None, stag
         done: dict = {}
         results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout,
                                  log, done) for n in names]
-    out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
+    out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results, solver=solver)
     if target is not None and any(r.error is None for r in results):
         try:
             log_tendons(out, on_wait, target)

@@ -23,6 +23,7 @@ from ..objective.settings import settings_dict
 from ..optimizer.homotopy import RunCallbacks, StageResult, run_schedule
 from ..optimizer.soft_ik import Figures, Iterate, SoftIK, active_set
 from ..solve.cholesky import cholesky_library
+from ..solve.linear import LinearSettings
 from ..version import __version__
 
 #: a final pose error above this share of L draws a warning (the goals were not reached)
@@ -93,14 +94,15 @@ def _complete(ik: SoftIK, st: StageResult) -> None:
 def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
              record: str | Path | None = None, export: str | Path | None = None, log_every: int = 0,
              progress: Progress | None = None, resume: str | Path | None = None,
-             png: str | Path | None = None) -> RunResult:
+             png: str | Path | None = None, factor_threads: int | None = None) -> RunResult:
     """Run the regularized soft IK on ``scene`` at resolution ``level`` (default
     1) with the linear ``solver`` (default "auto"), or continue the run recorded
     in ``resume`` at its own level and solver and on its own scene (``scene``
     may be None; a different level, solver or scene given is refused),
     recording every stage to ``record`` and writing the final problem export to
     ``export`` (default: beside the recording); ``png`` draws stage 0 beside the
-    final stage ("-": beside the recording)."""
+    final stage ("-": beside the recording); its factorizations run on
+    ``factor_threads`` (None: the process's)."""
     t0 = time.perf_counter()
     progress = progress or active() or Progress(enabled=False)
     completed: list[StageResult] = []
@@ -129,7 +131,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None,
     check_writable(record, "recording")
     check_writable(export, "export")
     settings = problem.scene.optimize
-    ik = SoftIK(problem, settings, solver)
+    ik = SoftIK(problem, settings, LinearSettings(solver, factor_threads))
     solver = ik.linear.name
     meta["solver"] = solver
 
