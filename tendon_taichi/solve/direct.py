@@ -186,14 +186,14 @@ class _Pattern:
         return np.repeat(np.arange(nf, dtype=np.int64), np.diff(self.indptr)) * nf + self.indices
 
 
-def _indefinite(pattern: _Pattern, threads: int | None = None) -> PardisoLDL | None:
-    """The pattern's PARDISO indefinite factorization (on ``threads``, as
-    :class:`~tendon_taichi.solve.pardiso.PardisoLDL` takes them), made the first
-    time a matrix of it is not positive definite (a new pattern's Cholesky almost
-    always succeeds); None where its Cholesky is qdldl's (no MKL)."""
+def _indefinite(pattern: _Pattern) -> PardisoLDL | None:
+    """The pattern's PARDISO indefinite factorization (on the threads asked of its
+    Cholesky), made the first time a matrix of it is not positive definite (a new
+    pattern's Cholesky almost always succeeds); None where its Cholesky is qdldl's
+    (no MKL)."""
     if pattern.indefinite is None and isinstance(pattern.ldl, PardisoLDL):
         pattern.indefinite = PardisoLDL(pattern.indptr, pattern.indices, len(pattern.indptr) - 1,
-                                        pattern.reorder, indefinite=True, threads=threads)
+                                        pattern.reorder, indefinite=True, threads=pattern.ldl.asked_threads)
     return pattern.indefinite
 
 
@@ -443,7 +443,7 @@ class DirectSolver(LinearSolver):
         if pattern.ldl is None:
             pattern.ldl = cholesky_class()(self.indptr, self.indices, self.shape[0], pattern.reorder,
                                            threads=self.factor_threads)
-        return Factorization(H, self.order, pattern.ldl, partial(_indefinite, pattern, self.factor_threads))
+        return Factorization(H, self.order, pattern.ldl, partial(_indefinite, pattern))
 
     def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:
         lu = self.factorize(H)
