@@ -25,8 +25,8 @@ from ..files import check_writable
 from ..io.recording import (TENDONS_OF, RecordedRun, RecordingError, chunk_at_stage, mesh_edges, read_recording,
                             rewrite, tendons_owner)
 from ..optimizer.soft_ik import state_solver
-from ..solve.linear import LinearSettings
 from ..physics.model import Model
+from ..solve.linear import LinearSettings
 from ..tasks.pool import Pool
 
 
