@@ -70,7 +70,7 @@ def recorded_state(scene_name: str, quick: bool, folder: Path):
     scene = tt.load_scene(scene_name)
     if quick:
         scene = with_overrides(scene, {"stage_iterations": 10, "k_min": 0.4})
-    run = tt.optimize(scene, 1, record=folder / "run.rrd", export=folder / "run.npz")
+    run = tt.optimize(scene, 1, record=folder / "run.rrd")  # its export beside it
     recorded = tt.read_recording(run.recording)
     stage = len(recorded.stages) - 1
     return run.problem, idealized_state(recorded, run.problem, stage, recorded.meta["solver"])

@@ -390,3 +390,100 @@ def test_a_design_searches_from_a_prior_designs_front(designed, tmp_path):
     assert f"{n} of the {n} layouts of '{d / 'out' / 'design.json'}' join the front's seeds" in r.stderr
     assert again["search"]["priors"] == n and again["search"]["routes_from"] == str(d / "out" / "design.json")
     assert first["search"]["priors"] == 0 and first["search"]["routes_from"] is None
+
+
+class _HereAsIfWorkers:
+    """Stands in for ``design``'s pool of worker processes: it says it has one, and
+    runs every piece here, pickled and unpickled as a worker would get it."""
+
+    def __init__(self, workers, setup=None, setup_args=()):
+        from tendon_taichi.tasks.pool import Pool
+
+        self.pool = Pool(0)
+        self.broken = None
+
+    active = 1
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    @staticmethod
+    def _sent(value):
+        import pickle
+
+        return pickle.loads(pickle.dumps(value))
+
+    def map(self, fn, items):
+        return [self._sent(fn)(self._sent(item)) for item in items]
+
+    def defer(self, fn, job):
+        return self.pool.defer(self._sent(fn), self._sent(job))
+
+    def collect(self, jobs):
+        return self.pool.collect(jobs)
+
+
+def test_a_design_hands_its_run_on_in_memory_and_its_thread_count_to_every_factorization(tmp_path, monkeypatch):
+    """``design`` extracts from the run it holds, not from its recording read back
+    (``read_recording`` is never called; the recording is still written and holds
+    the same run, to the bit), and a design with workers runs every factorization
+    on one thread - the pieces handed to its workers too - because it passes that
+    count on, whatever the process's own (here 3, every matrix threaded)."""
+    import sys
+
+    from conftest import use_cholesky
+    from tendon_taichi.apps import design as design_app
+    from tendon_taichi.body.scene import load_scene, with_overrides
+    from tendon_taichi.io import recording
+    from tendon_taichi.physics import runtime
+    from tendon_taichi.solve import pardiso
+
+    handle = use_cholesky(monkeypatch, "pardiso")
+    monkeypatch.setattr(pardiso, "PARALLEL_MIN", 0)
+    monkeypatch.setattr(runtime, "factor_threads", lambda: 3)
+    factored = []
+    real_factor = handle.factor
+
+    def factor(self, data):
+        factored.append((self.asked_threads, self.threads))
+        return real_factor(self, data)
+
+    monkeypatch.setattr(handle, "factor", factor)
+    reads = []
+
+    def read_back(path):
+        reads.append(path)
+        raise AssertionError(f"the design read its recording '{path}' back")
+
+    for module in [m for name, m in sys.modules.items() if name.startswith("tendon_taichi")]:
+        if getattr(module, "read_recording", None) is recording.read_recording:
+            monkeypatch.setattr(module, "read_recording", read_back)
+    monkeypatch.setattr(design_app, "Pool", _HereAsIfWorkers)
+    (tmp_path / "finger.toml").write_text(SCENE)
+    scene = with_overrides(load_scene(tmp_path / "finger.toml"), {"stage_iterations": 25, "k_min": 0.1})
+    done = design_app.design(scene, 1, tmp_path / "out", extractors=["strands", "path_cover"], png=False, beam=1,
+                             converge=False, workers=1)
+    assert reads == [] and factored and set(factored) == {(1, 1)}
+    monkeypatch.undo()
+    held, recorded = done.run.held, read_recording(tmp_path / "out" / "run.rrd")
+    assert held.meta == recorded.meta and held.scene_toml == recorded.scene_toml and not recorded.truncated
+    assert [st.summary for st in held.stages] == [st.summary for st in recorded.stages]
+    for h, r in zip(held.stages, recorded.stages):
+        assert all(np.array_equal(getattr(h, k), getattr(r, k)) for k in ("r", "ac", "tau", "xs"))
+    assert all(np.array_equal(held.arrays[k], r) for k, r in recorded.arrays.items())
+
+
+def test_a_worker_process_factorizes_on_one_thread_where_its_job_gives_none(monkeypatch):
+    """A worker's set-up makes one thread its process's factorizations' default:
+    the other processes hold the other cores."""
+    from tendon_taichi.apps.design import start_worker
+    from tendon_taichi.physics import runtime
+
+    monkeypatch.setitem(runtime._settings, "factor_threads", None)
+    monkeypatch.setenv("TENDON_TAICHI_FACTOR_THREADS", "2")
+    assert runtime.factor_threads() == 2
+    start_worker(None, warm=False)
+    assert runtime.factor_threads() == 1

@@ -481,13 +481,18 @@ def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatc
     threshold, in the reproducible mode) factorized by PARDISO on 1, 2 and 3
     threads, in its own order or PARDISO's, and shifted to be indefinite by its
     indefinite factorization, solves to the same bits, one
-    right-hand side or several at once (a tendon robot's low-rank columns); a process
-    factorizes a matrix above the threshold on its threads only while it has its
-    cores to itself, and one below it on one thread, outside the mode."""
+    right-hand side or several at once (a tendon robot's low-rank columns); a matrix
+    above the threshold is factorized on the threads the job gives (a handle keeps
+    them in its blank copies and its pickled ones), else on the process's, and
+    one below it on one thread, outside the mode."""
+    import pickle
+
     import scipy.sparse as sp
 
     from tendon_taichi.physics import runtime
     from tendon_taichi.solve import pardiso
+    from tendon_taichi.solve.backends import make_linear_solver
+    from tendon_taichi.solve.linear import LinearSettings
 
     use_cholesky(monkeypatch, "pardiso")
     p = build_problem(load_scene("t_shape"), 4)
@@ -524,8 +529,16 @@ def test_pardiso_factorizes_to_the_same_bits_on_any_number_of_threads(monkeypatc
     assert not below.reproducible and below.threads == 1  # one thread: the same bits without the mode
     assert below.factor(2.0 * eye.data)
     assert np.allclose(below.solve(np.ones(large - 1)), 0.5, rtol=1e-14, atol=0.0)
-    with runtime.cores_shared(True):
-        assert pardiso.factor_threads(large) == 1
+    assert pardiso.factor_threads(large, 2) == 2 and pardiso.factor_threads(large - 1, 2) == 1
+    eye = sp.identity(large, format="csc")
+    given = pardiso.PardisoLDL(eye.indptr, eye.indices, large, threads=1)
+    assert given.threads == 1 and given.blank().threads == 1 and pickle.loads(pickle.dumps(given)).threads == 1
+    assert pardiso.PardisoLDL(eye.indptr, eye.indices, large).threads == 3
+    settings = LinearSettings("direct", factor_threads=2)
+    assert make_linear_solver(settings, m).factor_threads == 2
+    assert make_linear_solver("direct", m).factor_threads is None
+    with runtime.cores_shared(True):  # what a script that replays a design's pieces asks (route_replay.py)
+        assert pardiso.factor_threads(large) == 1 and pardiso.factor_threads(large, 2) == 2
         with runtime.cores_shared(False):
             assert pardiso.factor_threads(large) == 1
     assert pardiso.factor_threads(large) == 3

@@ -33,11 +33,11 @@ from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.realizable import as_built_arrays
 from ..extract.settings import BEAM, BUDGET, ConsolidationSettings, FrontSettings
 from ..files import check_writable, file_stem, write_json
-from ..io.drawing import write_svg
 from ..io.export import write_as_built
-from ..io.plots import load as load_pictures, plot_design, plot_front
+from ..io.outputs import design_outputs
+from ..io.plots import load as load_pictures, plot_front
 from ..io.progress import Progress
-from ..io.recording import rewrite
+from ..io.recording import RecordedRun, rewrite
 from ..physics import runtime
 from ..tasks.pool import Pool
 from .extract import Extraction, extract, frictionless_error, log_layout
@@ -46,7 +46,13 @@ from .priors import PriorDesign, prior_layouts, read_prior, route_rows
 from .provenance import result_provenance
 
 #: what the output folder holds
-FILES = ("run.rrd", "run.npz", "as_built.npz", "design.json", "design.svg", "design.png", "front.png")
+FILES = ("run.rrd", "run.npz", "as_built.npz", "design.json", "design.png", "front.png")
+
+
+def design_files(dim: int) -> tuple[str, ...]:
+    """What the output folder of a ``dim``-dimensional body's design holds: :data:`FILES`
+    and its fabrication export (:func:`~tendon_taichi.io.outputs.design_outputs`)."""
+    return FILES + (design_outputs(dim).fabrication,)
 
 
 def default_out(scene: Scene, level: int) -> Path:
@@ -132,11 +138,11 @@ def start_worker(threads: int | None, arch: str | None = None, warm: bool = True
     workers): start Taichi (``arch``, ``threads``) and, with ``warm``, compile the
     kernels by a short design (:func:`warm_up`) and import what the pictures use
     (:func:`~tendon_taichi.io.plots.load`); returns the times (``init_s``,
-    ``warm_up_s``). Its factorizations run on one thread
-    (:func:`~tendon_taichi.physics.runtime.share_cores`)."""
+    ``warm_up_s``). Its factorizations run on one thread where the job gives none
+    (:func:`~tendon_taichi.physics.runtime.factor_threads`): other processes hold
+    the other cores."""
     t0 = time.perf_counter()
-    runtime.configure(arch=arch, threads=threads)
-    runtime.share_cores()  # its factorizations on one thread: other processes hold the other cores
+    runtime.configure(arch=arch, threads=threads, factor_threads=1)
     runtime.init()
     out = {"init_s": time.perf_counter() - t0, "warm_up_s": None}
     if warm:
@@ -191,24 +197,26 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     whose front's layouts the front searches from too (:mod:`.priors`);
     ``min_capstan``, the least worst capstan factor the recommendation accepts
     (:func:`recommend`). Goals out of reach of the budget end it after the
-    optimization (:func:`check_reach`)."""
+    optimization (:func:`check_reach`). Its factorizations run on one thread where
+    it starts workers (:func:`design_threads`), theirs too."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     prior = None if routes_from is None else read_prior(routes_from, scene)
     out = Path(out) if out is not None else default_out(scene, level)
-    for name in FILES:
+    for name in design_files(scene.body.dim):
         check_writable(out / name, "output")
     here = runtime.info()
-    with Pool(workers, start_worker, (here["threads"], here["arch"])) as pool, runtime.cores_shared(workers > 0):
+    threads = design_threads(workers)
+    with Pool(workers, start_worker, (here["threads"], here["arch"])) as pool:
         progress.message(f"design: optimizing {scene.name} at level {level}"
                          + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
         run = optimize(scene, level, solver, record=out / "run.rrd", progress=progress,
-                       options=RunOptions(export=out / "run.npz"))
+                       options=RunOptions(export=out / "run.npz", factor_threads=threads))
         check_reach(run, budget)
         for w in run.warnings:  # now, not only with the design: the search may take long
             progress.message(f"design: warning: {w}")
-        ex, layout, summary = recommended(run.recording, budget, max_tendons, extractors, consolidation, progress,
-                                          plugin_timeout, beam, converge, pool, prior, min_capstan)
+        ex, layout, summary = recommended(run.held, budget, max_tendons, extractors, consolidation, progress,
+                                          plugin_timeout, beam, converge, pool, prior, min_capstan, threads)
         summary["timing"]["optimize_s"] = run.summary["time_s"]
         summary["timing"]["workers"] = workers
         summary["warnings"] = list(run.warnings) + _budget_warning(summary)
@@ -218,6 +226,14 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     summary["time_s"] = time.perf_counter() - t0
     write_json(summary, out / "design.json")
     return Design(summary, run, ex, layout)
+
+
+def design_threads(workers: int) -> int:
+    """The threads of a design's sparse factorizations, in this process and in its
+    ``workers`` (they are handed them): one where there are workers, which hold
+    the other cores, else this process's
+    (:func:`~tendon_taichi.physics.runtime.factor_threads`)."""
+    return 1 if workers > 0 else runtime.factor_threads()
 
 
 def check_reach(run: RunResult, budget: float) -> None:
@@ -246,18 +262,21 @@ def _rounded_up(x: float) -> float:
     return r
 
 
-def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int | None = None,
+def recommended(recording: str | Path | RecordedRun, budget: float = BUDGET, max_tendons: int | None = None,
                 extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
                 progress: Progress | None = None, plugin_timeout: float | None = None, beam: int = BEAM,
                 converge: bool = True, workers: Pool | None = None, prior: PriorDesign | None = None,
-                min_capstan: float = 0.0) -> tuple[Extraction, Layout, dict]:
-    """Every extractor on a recorded run's last stage, consolidated and routed, the
-    count/error front searched from all their routes (:func:`search_front`), each
-    front entry solved again on the next finer mesh (``converge``), and the layout
-    recommended (:func:`recommend`, with ``min_capstan``): the extraction, the layout and the summary
-    ``design.json`` holds (no file is written). ``workers`` (a pool of worker
+                min_capstan: float = 0.0, factor_threads: int | None = None) -> tuple[Extraction, Layout, dict]:
+    """Every extractor on a recorded run's last stage (``recording``: its path, or the
+    run read or held in memory, as :func:`~.extract.extract` takes it), consolidated
+    and routed, the count/error front searched from all their routes
+    (:func:`search_front`), each front entry solved again on the next finer mesh
+    (``converge``), and the layout recommended (:func:`recommend`, with
+    ``min_capstan``): the extraction, the layout and the summary ``design.json``
+    holds (no file is written). ``workers`` (a pool of worker
     processes) share the consolidations and the front's independent pieces;
-    ``prior``'s front layouts (:func:`~.priors.read_prior`) join the front's seeds."""
+    ``prior``'s front layouts (:func:`~.priors.read_prior`) join the front's seeds;
+    every factorization runs on ``factor_threads`` (None: the process's)."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
     cons = consolidation or ConsolidationSettings(budget=budget)
@@ -267,9 +286,9 @@ def recommended(recording: str | Path, budget: float = BUDGET, max_tendons: int 
         progress.message(f"design: {text}")
 
     ex = extract(recording, extractors, solver="recorded", record=False, consolidation=cons, log=log,
-                 workers=workers, **kwargs)
+                 workers=workers, factor_threads=factor_threads, **kwargs)
     extract_s = time.perf_counter() - t0
-    problem, solver = ex.problem, ex.run.meta.get("solver", "auto")
+    problem, solver = ex.problem, ex.solver
     done = [r.consolidation for r in ex.results if r.error is None and r.consolidation is not None]
     if not done:
         raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
@@ -375,7 +394,7 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], bud
                    realizable_pose_error_rel=chosen["realizable_pose_error_rel"],
                    realizable_pose_error_rel_level=real.pose_error_rel,
                    realizable_pose_error_rel_frictionless=frictionless_error(
-                       problem, tendons, ex.state, run.settings, run.meta.get("solver", "auto"), real),
+                       problem, tendons, ex.state, run.settings, ex.solver, real),
                    idealized_pose_error_rel=ex.idealized_pose_error / problem.size)
     if real.poses is not None:
         metrics["realizable_pose_errors_rel"] = [r.pose_error_rel for r in real.poses]
@@ -406,14 +425,16 @@ def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool, 
     tendons = layout.tendons()
     title = f"{problem.scene.name} level {problem.level}: {layout.count} tendon(s), as built " \
             f"{100 * layout.error:.2f}% of L"
+    outputs = design_outputs(problem.dim)
+    fabrication = outputs.fabrication
     pictures = None
     if png:
-        job = ((out / "design.png", problem, tendons, layout.realizable, title),
+        job = (problem.dim, (out / "design.png", problem, tendons, layout.realizable, title),
                (out / "front.png", summary["front"], summary["budget"], summary["recommended"]["count"],
                 problem.scene.name))
         pictures = pool.defer(_draw_pictures, job)
     paths = {"recording": str(out / "run.rrd"), "export": str(out / "run.npz"), "json": str(out / "design.json"),
-             "svg": str(write_svg(out / "design.svg", problem, tendons, title)),
+             fabrication.rsplit(".")[-1]: str(outputs.write_fabrication(out / fabrication, problem, tendons, title)),
              "as_built": str(write_as_built(out / "as_built.npz", problem,
                                             as_built_arrays(problem, tendons, layout.realizable)))}
     run = ex.run
@@ -431,7 +452,9 @@ def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool, 
     return paths
 
 
-def _draw_pictures(job: tuple[tuple, tuple]) -> tuple[str, str]:
-    """design.png and front.png from the arguments of :func:`~tendon_taichi.io.plots.plot_design`
-    and of :func:`~tendon_taichi.io.plots.plot_front`; their paths."""
-    return str(plot_design(*job[0])), str(plot_front(*job[1]))
+def _draw_pictures(job: tuple[int, tuple, tuple]) -> tuple[str, str]:
+    """design.png and front.png from the body's dimension, the arguments of its
+    ``plot_design`` (:func:`~tendon_taichi.io.outputs.design_outputs`) and those of
+    :func:`~tendon_taichi.io.plots.plot_front`; their paths."""
+    dim, design_args, front_args = job
+    return str(design_outputs(dim).plot_design(*design_args)), str(plot_front(*front_args))

@@ -27,6 +27,7 @@ from ..io.recording import (TENDONS_OF, RecordedRun, RecordingError, chunk_at_st
                             rewrite, tendons_owner)
 from ..optimizer.soft_ik import state_solver
 from ..physics.model import Model
+from ..solve.linear import LinearSettings
 from ..tasks.pool import Pool
 
 
@@ -75,6 +76,7 @@ class Extraction:
     results: list[ExtractorResult]
     record: str | None = None  # the file the tendons were logged into
     record_error: str | None = None  # why the tendons could not be logged
+    solver: LinearSettings | None = None  # the linear backend the extractors' robots were solved with
 
     def as_json(self) -> dict:
         out = {"recording": str(self.run.path), "scene": self.run.meta.get("scene"),
@@ -255,12 +257,13 @@ def frictionless_error(problem: Problem, tendons: list[Tendon], state: Idealized
     return solve_realizable_poses(Context(bare, state, settings, solver), tendons, real.ratios).pose_error_rel
 
 
-def extract(path: str | Path, names: list[str] | None = None, stage: int | None = None,
+def extract(path: str | Path | RecordedRun, names: list[str] | None = None, stage: int | None = None,
             options: dict[str, dict] | None = None, solver: str = "recorded",
             metric_settings: MetricSettings | None = None, record: bool | str | Path = False,
             consolidation: ConsolidationSettings | None = None, on_wait=None,
             plugin_timeout: float = PLUGIN_TIMEOUT, friction: float | None = None,
-            clearance: float | None = None, log=None, workers: Pool | None = None) -> Extraction:
+            clearance: float | None = None, log=None, workers: Pool | None = None,
+            factor_threads: int | None = None) -> Extraction:
     """Run extractors (default: every installed one, each for at most
     ``plugin_timeout`` s) on a recorded stage (default: the last completed), each
     followed by consolidation (default settings unless ``consolidation`` is
@@ -270,11 +273,15 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     the viewer shows with the run (:func:`log_tendons`; ``on_wait`` is called if
     another process is writing; when that fails, the results are kept and
     ``record_error`` says why). ``workers`` (a pool of worker processes) share the
-    consolidations (the same results)."""
-    run = read_recording(path)
+    consolidations (the same results); every factorization, theirs too, runs on
+    ``factor_threads`` (None: each process's own). ``path`` is the recording's
+    path, or the run already read
+    (:func:`~tendon_taichi.io.recording.read_recording`) or handed on in memory
+    (:class:`~tendon_taichi.io.recording.HeldRun`: the file is not read again)."""
+    run = path if isinstance(path, RecordedRun) else read_recording(path)
     target = record_target(run, record)
     if not run.stages:
-        raise InputError(f"'{path}' has no completed stage to extract from")
+        raise InputError(f"'{run.path}' has no completed stage to extract from")
     if stage is None:
         stage = len(run.stages) - 1
     if not 0 <= stage < len(run.stages):
@@ -284,7 +291,7 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
     unknown_opts = set(options) - set(names)
     if unknown_opts:
         raise InputError(f"options given for extractor(s) not run: {', '.join(sorted(unknown_opts))}")
-    solver = run.meta.get("solver", "auto") if solver == "recorded" else solver
+    solver = LinearSettings(run.meta.get("solver", "auto") if solver == "recorded" else solver, factor_threads)
     problem = run.problem().with_tendons(friction=friction, clearance=clearance)
     state = idealized_state(run, problem, stage, solver)
     ms = metric_settings or MetricSettings(mu=problem.scene.tendons.friction)
@@ -295,7 +302,7 @@ def extract(path: str | Path, names: list[str] | None = None, stage: int | None 
         done: dict = {}
         results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout,
                                  log, done) for n in names]
-    out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results)
+    out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results, solver=solver)
     if target is not None and any(r.error is None for r in results):
         try:
             log_tendons(out, on_wait, target)

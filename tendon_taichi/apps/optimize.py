@@ -17,11 +17,13 @@ from ..files import check_writable, file_stem
 from ..io.export import pose_arrays, write_export
 from ..io.plots import plot_stages
 from ..io.progress import Progress, active
-from ..io.recording import RecordedRun, Recorder, RecordingError, completed_chunks, read_recording
+from ..io.recording import (HeldRun, RecordedRun, Recorder, RecordingError, as_read, completed_chunks, held_stage,
+                            problem_tensors, read_recording)
 from ..objective.settings import settings_dict
 from ..optimizer.homotopy import RunCallbacks, StageResult, run_schedule
 from ..optimizer.soft_ik import Figures, Iterate, SoftIK, active_set
 from ..solve.cholesky import cholesky_library
+from ..solve.linear import LinearSettings
 from ..version import __version__
 
 #: a final pose error above this share of L draws a warning (the goals were not reached)
@@ -39,7 +41,8 @@ class Interrupted(Stopped):
 
 @dataclass
 class RunResult:
-    """A finished (or resumed) optimization."""
+    """A finished (or resumed) optimization; ``held``, the run as its recording
+    holds it, kept in memory (what ``design`` extracts from)."""
 
     problem: Problem
     stages: list[StageResult]
@@ -47,6 +50,7 @@ class RunResult:
     recording: Path
     export: Path | None
     warnings: list[str] = field(default_factory=list)
+    held: HeldRun | None = None
 
 
 def _summary(problem: Problem, solver: str, stages: list, recording: Path, export: Path | None,
@@ -92,12 +96,14 @@ class RunOptions:
     """What else :func:`optimize` does: continue the run recorded in ``resume``;
     write the final problem export to ``export`` (None: beside the recording); log
     the geometry every ``log_every`` iterations (0: at each stage's end only); draw
-    stage 0 beside the final stage into ``png`` ("-": beside the recording)."""
+    stage 0 beside the final stage into ``png`` ("-": beside the recording); run
+    the factorizations on ``factor_threads`` (None: the process's)."""
 
     resume: str | Path | None = None
     export: str | Path | None = None
     log_every: int = 0
     png: str | Path | None = None
+    factor_threads: int | None = None
 
 
 def optimize(scene: Scene, level: int | None = None, solver: str | None = None, record: str | Path | None = None,
@@ -109,8 +115,10 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None, 
     recording every stage to ``record``, and the rest ``options`` say."""
     t0 = time.perf_counter()
     resume, export, log_every, png = options.resume, options.export, options.log_every, options.png
+    factor_threads = options.factor_threads
     progress = progress or active() or Progress(enabled=False)
     completed: list[StageResult] = []
+    held, header = [], None  # the completed stages and the run's metadata as the recording holds them
     if resume is not None:
         run = read_recording(resume)
         if not run.stages:
@@ -119,6 +127,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None, 
         problem = run.problem()
         solver = run.meta.get("solver") or solver or "auto"
         completed = [_recorded_stage(rs, problem) for rs in run.stages]
+        held, header = list(run.stages), run.meta
         record = Path(record) if record is not None else Path(resume)
         meta = dict(run.meta)
     else:
@@ -134,7 +143,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None, 
     check_writable(record, "recording")
     check_writable(export, "export")
     settings = problem.scene.optimize
-    ik = SoftIK(problem, settings, solver)
+    ik = SoftIK(problem, settings, LinearSettings(solver, factor_threads))
     solver = ik.linear.name
     meta["solver"] = solver
 
@@ -153,6 +162,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None, 
     def on_stage(st: StageResult):
         recorder.iteration(step[0], st, force=True)
         recorder.stage(st, step[0])
+        held.append(held_stage(st, step[0]))
         if tmp is not None:
             _promote(tmp)
         finished.append(st)
@@ -198,7 +208,9 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None, 
                     settings.tension_scale)
         extra["png"] = str(png)
     summary = _summary(problem, solver, stages, record, export, t0=t0, ik=ik, extra=extra)
-    return RunResult(problem, stages, summary, record, export, warnings=warnings)
+    kept = HeldRun(record, header or as_read(recorder.meta), problem.scene.source, problem_tensors(problem), held,
+                   built=problem)
+    return RunResult(problem, stages, summary, record, export, warnings=warnings, held=kept)
 
 
 def _check_resumable(run: RecordedRun, level: int | None, solver: str | None, scene: Scene | None) -> None:

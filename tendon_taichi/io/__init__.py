@@ -6,7 +6,7 @@ and progress on stderr (:mod:`.progress`)."""
 from .._lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(__name__, {
-    ".recording": ("Recorder", "RecordedRun", "RecordedStage", "RecordingError", "read_recording"),
+    ".recording": ("Recorder", "RecordedRun", "RecordedStage", "HeldRun", "RecordingError", "read_recording"),
     ".export": ("write_export", "write_vtu", "EXPORT_KEYS"),
     ".drawing": ("write_svg",),
 })

@@ -202,8 +202,7 @@ class Recorder:
         rec.log("/stages/tau", rr.Tensor(np.asarray(result.tau, dtype=np.float64)))
         if result.xs is not None:
             rec.log("/stages/x", rr.Tensor(np.asarray(result.xs, dtype=np.float64)))
-        summary = {**result.summary(), "step": step, "message": result.message}
-        rec.log("/stages/summary", rr.TextDocument(json.dumps(summary), media_type="text/plain"))
+        rec.log("/stages/summary", rr.TextDocument(json.dumps(stage_summary(result, step)), media_type="text/plain"))
         rec.flush()
 
     def log(self, entity: str, archetype, static: bool = False) -> None:
@@ -213,6 +212,12 @@ class Recorder:
         self._send_scalars()
         self.rec.flush()
         self.rec.disconnect()
+
+
+def stage_summary(result, step: int) -> dict:
+    """A completed stage's ``/stages/summary``: its figures (``result.summary()``),
+    ``step`` (the run's iteration count at its end) and its ``message``."""
+    return {**result.summary(), "step": step, "message": result.message}
 
 
 def problem_tensors(p: Problem) -> dict[str, np.ndarray]:
@@ -269,6 +274,37 @@ class RecordedRun:
         return Problem(scene, int(self.meta["resolution"]), mesh, fixed, fibers,
                        target=Embedding(a["target_tri"].astype(np.int64), a["target_bary"]),
                        target_goal=a["target_goal"])
+
+
+@dataclass
+class HeldRun(RecordedRun):
+    """A run as its recording holds it, handed on in memory by the process that ran
+    it (``design``): the values :func:`read_recording` would give back
+    (:func:`held_stage`, :func:`as_read`) and ``built``, the problem that ran,
+    rather than one rebuilt from the arrays."""
+
+    built: Problem | None = None
+
+    def problem(self) -> Problem:
+        """The problem that ran (the one :meth:`RecordedRun.problem` rebuilds)."""
+        return self.built
+
+
+def as_read(value):
+    """A JSON-able ``value`` as the recording gives it back: through JSON (tuples
+    become lists, float subclasses floats, keys strings)."""
+    return json.loads(json.dumps(value))
+
+
+def held_stage(result, step: int) -> RecordedStage:
+    """A completed stage (a :class:`~tendon_taichi.optimizer.homotopy.StageResult`
+    ending at iteration ``step``) as :func:`read_recording` gives it back: its
+    summary through JSON, its vectors copied as f64."""
+    def f64(a):
+        return None if a is None else np.array(a, dtype=np.float64)
+
+    return RecordedStage(as_read(stage_summary(result, step)), f64(result.r), f64(result.ac), f64(result.tau),
+                         f64(result.xs))
 
 
 def _whole_frames(path: Path) -> tuple[int, bool]:

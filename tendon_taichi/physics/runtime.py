@@ -51,13 +51,16 @@ _settings = {
     "arch": None,
     "threads": None,
     "parallel_threshold": None,
+    "factor_threads": None,
 }
-_state = {"initialized": False, "arch": None, "init_s": None, "cores_shared": False}
+_state = {"initialized": False, "arch": None, "init_s": None}
 
 
 def configure(arch: str | None = None, threads: int | None = None,
-              parallel_threshold: int | None = None) -> None:
-    """Choose the backend before Taichi starts. Unset values keep defaults."""
+              parallel_threshold: int | None = None, factor_threads: int | None = None) -> None:
+    """Choose the backend before Taichi starts, and the threads of this process's
+    sparse factorizations where a job does not give its own (:func:`factor_threads`;
+    a worker process: one). Unset values keep defaults."""
     if arch is not None:
         if arch not in ARCHES:
             raise InputError(f"unknown Taichi arch '{arch}' (choose from {', '.join(ARCHES)})")
@@ -68,6 +71,8 @@ def configure(arch: str | None = None, threads: int | None = None,
         _settings["threads"] = _checked_threads(threads, "threads")
     if parallel_threshold is not None:
         _settings["parallel_threshold"] = int(parallel_threshold)
+    if factor_threads is not None:
+        _settings["factor_threads"] = _checked_threads(factor_threads, "factor threads")
 
 
 def _requested_arch() -> str:
@@ -260,33 +265,31 @@ def cpu_threads() -> int:
 
 
 def factor_threads() -> int:
-    """Threads a sparse factorization may use (:mod:`~tendon_taichi.solve.pardiso`):
-    ``TENDON_TAICHI_FACTOR_THREADS`` where given, else :func:`cpu_threads`, in a
-    process that has its cores to itself; one while it shares them with worker
-    processes (:func:`cores_shared`) or is one of them.
-    Threads that wait for a core another process holds make a factorization many
-    times slower."""
-    if _state["cores_shared"]:
-        return 1
+    """Threads a sparse factorization may use (:mod:`~tendon_taichi.solve.pardiso`)
+    where the job that makes it gives none
+    (:class:`~tendon_taichi.solve.linear.LinearSettings`): the ones
+    :func:`configure` set (a worker process: one), else
+    ``TENDON_TAICHI_FACTOR_THREADS`` where given, else :func:`cpu_threads`.
+    A process that shares its cores with others passes one: threads that wait
+    for a core another process holds make a factorization many times slower."""
+    if _settings["factor_threads"] is not None:
+        return _settings["factor_threads"]
     n = _env_int("TENDON_TAICHI_FACTOR_THREADS")
     return cpu_threads() if n is None else max(1, n)
 
 
 @contextlib.contextmanager
 def cores_shared(shared: bool = True):
-    """Within: this process shares its cores with others (a pool's workers, or as
-    one of them) where ``shared``; :func:`factor_threads` is then one."""
-    before = _state["cores_shared"]
-    _state["cores_shared"] = before or shared
+    """Within, where ``shared``: :func:`factor_threads` is one. For scripts that
+    replay a piece of a job whose processes shared the cores
+    (``benchmarks/route_replay.py``); the package passes its thread counts."""
+    before = _settings["factor_threads"]
+    if shared:
+        _settings["factor_threads"] = 1
     try:
         yield
     finally:
-        _state["cores_shared"] = before
-
-
-def share_cores() -> None:
-    """From now on this process shares its cores (a worker's set-up)."""
-    _state["cores_shared"] = True
+        _settings["factor_threads"] = before
 
 
 def parallel_threshold() -> int | None:
@@ -328,4 +331,4 @@ def info() -> dict:
 
 
 __all__ = ["ti", "configure", "init", "ensure_init", "is_cpu", "host_view", "cores", "cpu_threads", "factor_threads",
-           "cores_shared", "share_cores", "parallel_threshold", "check", "info"]
+           "cores_shared", "parallel_threshold", "check", "info"]

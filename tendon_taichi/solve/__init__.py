@@ -6,7 +6,7 @@ factorization (:mod:`.direct`), by name in :mod:`.backends`."""
 from .._lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(__name__, {
-    ".linear": ("LinearSolver", "LinearStats", "SOLVERS", "AUTO_DIRECT_MAX_DOFS", "resolve_solver"),
+    ".linear": ("LinearSolver", "LinearStats", "LinearSettings", "SOLVERS", "AUTO_DIRECT_MAX_DOFS", "resolve_solver"),
     ".backends": ("make_linear_solver",),
     ".cg": ("CGSolver", "CGStatus", "FactorPreconditioner"),
     ".preconditioner": ("ReusedPreconditioner",),

@@ -123,8 +123,8 @@ class FactorPreconditioner(ReusedPreconditioner):
     not positive definite (PCG meets r.M^-1 r <= 0), the PSD-projected one,
     which always is."""
 
-    def __init__(self, model: Model, refresh_iterations: int = 20):
-        super().__init__(model, refresh_iterations)
+    def __init__(self, model: Model, refresh_iterations: int = 20, factor_threads: int | None = None):
+        super().__init__(model, refresh_iterations, factor_threads=factor_threads)
 
     @property
     def lu(self) -> Factorization | None:
@@ -144,7 +144,8 @@ class CGSolver(LinearSolver):
     (``multigrid``), a reused geometric-multigrid V-cycle (``geometric``) or
     2x2 block Jacobi inside one fused Taichi kernel per iteration (``jacobi``)."""
 
-    def __init__(self, model: Model, max_iter: int | None = None, preconditioner: str = "factor"):
+    def __init__(self, model: Model, max_iter: int | None = None, preconditioner: str = "factor",
+                 factor_threads: int | None = None):
         if preconditioner not in PRECONDITIONERS:
             raise InputError(f"unknown preconditioner '{preconditioner}' (choose from "
                              f"{', '.join(PRECONDITIONERS)})")
@@ -152,7 +153,7 @@ class CGSolver(LinearSolver):
         self.name = PRECONDITIONERS[preconditioner]
         self.model = model
         self.preconditioner = preconditioner
-        self.pre = (FactorPreconditioner(model) if preconditioner == "factor" else
+        self.pre = (FactorPreconditioner(model, factor_threads=factor_threads) if preconditioner == "factor" else
                     MultigridPreconditioner(model) if preconditioner == "multigrid" else
                     GeometricMultigridPreconditioner(model) if preconditioner == "geometric" else None)
         self.max_iter = max_iter or (200 if self.pre else max(1000, 4 * model.dofs))

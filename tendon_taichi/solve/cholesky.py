@@ -25,10 +25,11 @@ class LDL:
     (CSC ``indptr``, ``indices``, n x n): the symbolic analysis with the first,
     only the numbers after. qdldl orders every pattern by its own AMD, so
     ``reorder`` (:class:`~tendon_taichi.solve.pardiso.PardisoLDL`'s) changes
-    nothing here. One factorization is current at a time (``generation`` counts
-    them)."""
+    nothing here, nor ``threads``: qdldl runs on one. One factorization is
+    current at a time (``generation`` counts them)."""
 
-    def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int, reorder: bool = False):
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int, reorder: bool = False,
+                 threads: int | None = None):
         self._pattern = (indptr, indices, n)
         self.upper, self.indices, self.indptr = triangle(indptr, indices, n)
         self.n = n

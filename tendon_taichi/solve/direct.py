@@ -191,12 +191,13 @@ class _Pattern:
 
 @probe("indefinite")
 def _indefinite(pattern: _Pattern) -> PardisoLDL | None:
-    """The pattern's PARDISO indefinite factorization, made the first time a matrix
-    of it is not positive definite (a new pattern's Cholesky almost always
-    succeeds); None where its Cholesky is qdldl's (no MKL)."""
+    """The pattern's PARDISO indefinite factorization (on the threads asked of its
+    Cholesky), made the first time a matrix of it is not positive definite (a new
+    pattern's Cholesky almost always succeeds); None where its Cholesky is qdldl's
+    (no MKL)."""
     if pattern.indefinite is None and isinstance(pattern.ldl, PardisoLDL):
         pattern.indefinite = PardisoLDL(pattern.indptr, pattern.indices, len(pattern.indptr) - 1,
-                                        pattern.reorder, indefinite=True)
+                                        pattern.reorder, indefinite=True, threads=pattern.ldl.asked_threads)
     return pattern.indefinite
 
 
@@ -207,7 +208,9 @@ class DirectSolver(LinearSolver):
     The sparsity pattern (free DOFs only) and the scatter map from element and
     cable entries to it are built once; an assembly then only computes values.
     ``ordered=False`` keeps the free DOFs' own numbering (node by node, x then y)
-    instead of a fill-reducing order, for assembly without factorization."""
+    instead of a fill-reducing order, for assembly without factorization.
+    ``factor_threads``: the threads its factorizations run on (None: the
+    process's; :class:`~tendon_taichi.solve.pardiso.PardisoLDL`)."""
 
     name = "direct"
     fresh_solves = True
@@ -223,11 +226,12 @@ class DirectSolver(LinearSolver):
     #: for bit as a new one of the same cables)
     detached_max = DETACHED_MAX
 
-    def __init__(self, model: Model, ordered: bool = True):
+    def __init__(self, model: Model, ordered: bool = True, factor_threads: int | None = None):
         self.model = model
         self.stats = LinearStats()
         self.free = np.repeat(~model.fixed, 2)
         self.ordered = ordered
+        self.factor_threads = factor_threads
         self.factor = None  # the last factorization, reused by chord steps and predictors
         self.factor_exact = False
         self._patterns: dict[bytes, _Pattern] = {}  # by triangles of the cables' points, oldest first
@@ -441,7 +445,8 @@ class DirectSolver(LinearSolver):
         """Factorize an ordered Hessian (:meth:`assemble_ordered`)."""
         pattern = self.pattern
         if pattern.ldl is None:
-            pattern.ldl = cholesky_class()(self.indptr, self.indices, self.shape[0], pattern.reorder)
+            pattern.ldl = cholesky_class()(self.indptr, self.indices, self.shape[0], pattern.reorder,
+                                           threads=self.factor_threads)
         return Factorization(H, self.order, pattern.ldl, partial(_indefinite, pattern))
 
     def _factor_solve(self, H: Assembled, b: np.ndarray) -> np.ndarray:

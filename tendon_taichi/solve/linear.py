@@ -45,6 +45,20 @@ SOLVERS = ("auto", "cg", "cg-amg", "cg-gmg", "cg-jacobi", "direct")
 AUTO_DIRECT_MAX_DOFS = 100000
 
 
+@dataclass(frozen=True)
+class LinearSettings:
+    """A linear backend as a job asks for it: its ``name`` (:data:`SOLVERS`) and the
+    threads its sparse factorizations run on, ``factor_threads`` (None: the
+    process's, :func:`~tendon_taichi.physics.runtime.factor_threads`; either way one
+    below :data:`~tendon_taichi.solve.pardiso.PARALLEL_MIN` DOFs). Given wherever a
+    backend's name is (the ``solver`` arguments), it reaches every backend the job
+    makes, in the worker processes it hands pieces to too (``design``: one thread
+    where worker processes share the cores)."""
+
+    name: str = "auto"
+    factor_threads: int | None = None
+
+
 def resolve_solver(name: str, dofs: int) -> str:
     """The backend that ``name`` stands for at this size (``auto`` picks by DOFs)."""
     if name == "auto":

@@ -42,7 +42,7 @@ from ..errors import ConvergenceError
 from ..physics.model import Model
 from ._newton_kernels import accept, direction_from, newton_rhs, take_direction, trial
 from .backends import make_linear_solver
-from .linear import LinearSolver
+from .linear import LinearSettings, LinearSolver
 from .secant import PAIRS, SecantMemory
 
 #: a residual at most this many times the tolerance ...
@@ -82,11 +82,11 @@ class NewtonSolver:
     at the tolerance of the equilibria inside them, which the corrections move.
     """
 
-    def __init__(self, model: Model, solver: str | LinearSolver = "auto", tol: float = 1e-10,
+    def __init__(self, model: Model, solver: str | LinearSettings | LinearSolver = "auto", tol: float = 1e-10,
                  max_iter: int = 100, force_scale: float | None = None, eta_max: float = 0.01,
                  reuse: bool = False):
         self.model = model
-        self.linear = make_linear_solver(solver, model) if isinstance(solver, str) else solver
+        self.linear = solver if isinstance(solver, LinearSolver) else make_linear_solver(solver, model)
         self.tol = tol
         self.max_iter = max_iter
         self.eta_max = eta_max

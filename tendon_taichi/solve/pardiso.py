@@ -40,13 +40,15 @@ AMD. So the direct backend takes PARDISO at every size where it loads. Without
 the extra the numbers are qdldl's: the same designs up to round-off, which the
 search can turn into another layout here and there.
 
-Threads. From :data:`PARALLEL_MIN` DOFs a factorization runs on the process's
-threads (:func:`~tendon_taichi.physics.runtime.factor_threads`: its cores where it
-has them to itself - ``optimize``, ``simulate``, ``bench`` -, one in ``design``,
-whose worker processes hold the other cores, and in every worker): at level 5
-about 1.7x faster on two (benchmarks/pardiso_modes.py). Its numbers do not
-depend on the threads: there PARDISO runs in its conditional numerical
-reproducibility mode (:data:`CNR`), in
+Threads. From :data:`PARALLEL_MIN` DOFs a factorization runs on the threads its
+job gives (``threads``, from the job's
+:class:`~tendon_taichi.solve.linear.LinearSettings`: one in ``design`` where its
+worker processes hold the other cores, and in what it hands them), else on the
+process's (:func:`~tendon_taichi.physics.runtime.factor_threads`: its cores where
+it has them to itself - ``optimize``, ``simulate``, ``bench`` -, one in every
+worker): at level 5 about 1.7x faster on two (benchmarks/pardiso_modes.py). Its
+numbers do not depend on the threads: there PARDISO runs in its conditional
+numerical reproducibility mode (:data:`CNR`), in
 which the factors of t_shape's lattices at levels 4, 5 and 6 and of its tendon
 patterns in PARDISO's own order solve to the same bits on one, two and three
 threads, and whatever the mode's number - one right-hand side at a time: several
@@ -192,11 +194,13 @@ def _threading_layer(mkl_rt: str) -> int:
     return MKL_THREADING_SEQUENTIAL
 
 
-def factor_threads(n: int) -> int:
-    """Threads a factorization of order ``n`` runs on: the process's
-    (:func:`~tendon_taichi.physics.runtime.factor_threads`) from :data:`PARALLEL_MIN`
-    DOFs, else one."""
-    return runtime.factor_threads() if n >= PARALLEL_MIN else 1
+def factor_threads(n: int, threads: int | None = None) -> int:
+    """Threads a factorization of order ``n`` runs on: ``threads``, or where None the
+    process's (:func:`~tendon_taichi.physics.runtime.factor_threads`), from
+    :data:`PARALLEL_MIN` DOFs, else one."""
+    if n < PARALLEL_MIN:
+        return 1
+    return runtime.factor_threads() if threads is None else threads
 
 
 class PardisoLDL:
@@ -208,17 +212,19 @@ class PardisoLDL:
     order of it (module docstring), in the reproducible mode or not
     (``reproducible``, default: from :data:`PARALLEL_MIN` DOFs); with
     ``indefinite`` by the symmetric indefinite LDL^T instead of Cholesky (module
-    docstring). One factorization is current at a time (``generation`` counts them)."""
+    docstring), on ``threads`` (:func:`factor_threads`: None, the process's). One
+    factorization is current at a time (``generation`` counts them)."""
 
     def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int, reorder: bool = False,
-                 reproducible: bool | None = None, indefinite: bool = False):
+                 reproducible: bool | None = None, indefinite: bool = False, threads: int | None = None):
         self._pattern = (indptr, indices, n)
         # the lower triangle by columns is the upper triangle by rows, as PARDISO takes it
         self.lower, ja, self.ia = triangle(indptr, indices, n, lower=True)
         self.ja = np.ascontiguousarray(ja, dtype=np.int32)
         self.n = n
         self.reorder = reorder
-        self.threads = factor_threads(n)
+        self.asked_threads = threads
+        self.threads = factor_threads(n, threads)
         #: whether it runs in the reproducible mode (:data:`CNR`); by default from
         #: :data:`PARALLEL_MIN` DOFs, where a factorization may run on several threads
         self.reproducible = n >= PARALLEL_MIN if reproducible is None else bool(reproducible)
@@ -244,7 +250,7 @@ class PardisoLDL:
     def blank(self) -> "PardisoLDL":
         """A handle of the same pattern and settings, neither analyzed nor factorized."""
         return PardisoLDL(*self._pattern, reorder=self.reorder, reproducible=self.reproducible,
-                          indefinite=self.indefinite)
+                          indefinite=self.indefinite, threads=self.asked_threads)
 
     def _fixed_args(self) -> tuple:
         """The call's arguments that stay the same from call to call, made once (a
@@ -337,9 +343,10 @@ class PardisoLDL:
         return state
 
     def __setstate__(self, state: dict) -> None:
-        """A copy analyzes on the threads of the process it is in."""
+        """A copy analyzes on the threads it was made with, or where it was given none
+        on those of the process it is in."""
         self.__dict__.update(state)
-        self.threads = factor_threads(self.n)
+        self.threads = factor_threads(self.n, self.asked_threads)
 
     def __del__(self):
         try:

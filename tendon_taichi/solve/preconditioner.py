@@ -25,10 +25,12 @@ class ReusedPreconditioner(ABC):
     A solve that takes more than ``refresh_iterations`` marks it stale (the CG
     backend calls :meth:`reset`), and the next solve refreshes it at the state
     of the moment. ``ordered``: assemble in the direct backend's fill-reducing
-    order (for a factorization) or in the free DOFs' own numbering."""
+    order (for a factorization) or in the free DOFs' own numbering;
+    ``factor_threads``: the threads of its factorizations (:class:`DirectSolver`)."""
 
-    def __init__(self, model: Model, refresh_iterations: int, ordered: bool = True):
-        self.direct = DirectSolver(model, ordered=ordered)
+    def __init__(self, model: Model, refresh_iterations: int, ordered: bool = True,
+                 factor_threads: int | None = None):
+        self.direct = DirectSolver(model, ordered=ordered, factor_threads=factor_threads)
         self.refresh_iterations = refresh_iterations
         self.operator = None
         self.projected = False
