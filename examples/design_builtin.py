@@ -13,7 +13,9 @@ import argparse
 
 import tendon_taichi as tt
 from tendon_taichi.apps.design import design
+from tendon_taichi.apps.settings import DesignSettings
 from tendon_taichi.body.scene import with_overrides
+from tendon_taichi.extract.settings import FrontSettings
 
 #: the short homotopy of ``--quick``: [optimize] settings of the scene replaced
 QUICK = {"stage_iterations": 10, "k_min": 0.4}
@@ -30,7 +32,8 @@ def main(argv=None) -> dict:
     scene = tt.load_scene(args.scene)
     if args.quick:
         scene = with_overrides(scene, QUICK)
-    d = design(scene, level=args.level, out=args.out, png=not args.quick, converge=not args.quick)
+    settings = DesignSettings(png=not args.quick, front=FrontSettings(converge=not args.quick))
+    d = design(scene, level=args.level, out=args.out, settings=settings)
     rec = d.summary["recommended"]
     error = rec["metrics"]["realizable_pose_error_rel"]
     print(f"{scene.name} level {args.level}: {rec['count']} tendon(s), as built {100 * error:.2f}% of L")

@@ -15,7 +15,9 @@ import numpy as np
 
 import tendon_taichi as tt
 from tendon_taichi.apps.design import design
+from tendon_taichi.apps.settings import DesignSettings
 from tendon_taichi.body.scene import with_overrides
+from tendon_taichi.extract.settings import FrontSettings
 
 QUICK = {"stage_iterations": 10, "k_min": 0.4}
 
@@ -55,7 +57,8 @@ def main(argv=None) -> dict:
     scene = tt.parse_scene(tapered_finger(), origin="scene_in_python.py")
     if args.quick:
         scene = with_overrides(scene, QUICK)
-    d = design(scene, level=1, out=args.out, png=not args.quick, converge=not args.quick)
+    settings = DesignSettings(png=not args.quick, front=FrontSettings(converge=not args.quick))
+    d = design(scene, level=1, out=args.out, settings=settings)
     rec = d.summary["recommended"]
     print(f"{scene.name}: {rec['count']} tendon(s), as built "
           f"{100 * rec['metrics']['realizable_pose_error_rel']:.2f}% of L, body size {100 * d.summary['body_size']:.2f} cm")

@@ -318,29 +318,9 @@ def test_no_benchmark_uses_a_private_name_of_the_package():
 MAX_PARAMETERS = 6
 #: ... and the most positional arguments a call passes (the rest go by keyword)
 MAX_POSITIONAL = 5
-#: what the two rules below leave alone, each with its reason: apps/design.py and apps/extract.py are
-#: being restructured elsewhere (design hands its problem and states to the extraction in memory), and
-#: their functions' parameters and the calls among them go with that (issue 72, item 2)
-SPARED = {
-    ("apps/design.py", "design"): "restructured with the in-memory hand-over",
-    ("apps/design.py", "recommended"): "restructured with the in-memory hand-over",
-    ("apps/design.py", "finer_mesh_errors"): "restructured with the in-memory hand-over",
-    ("apps/design.py", "_write"): "restructured with the in-memory hand-over",
-    ("apps/design.py", "_summary"): "restructured with the in-memory hand-over",
-    ("apps/design.py", "frictionless_error"): "restructured with the in-memory hand-over",
-    ("apps/design.py", "log_layout"): "restructured with the in-memory hand-over",
-    ("apps/extract.py", "run_extractor"): "restructured with the in-memory hand-over",
-    ("apps/extract.py", "extract"): "restructured with the in-memory hand-over",
-    ("apps/extract.py", "IdealizedState"): "restructured with the in-memory hand-over",
-    ("apps/extract.py", "_plugin_tendons"): "restructured with the in-memory hand-over",
-    ("apps/extract.py", "_consolidated"): "restructured with the in-memory hand-over",
-    ("apps/extract.py", "_scored"): "restructured with the in-memory hand-over",
-    ("apps/extract.py", "_run_shared"): "restructured with the in-memory hand-over",
-    ("apps/extract.py", "Extraction"): "restructured with the in-memory hand-over",
-    ("apps/extract.py", "frictionless_error"): "restructured with the in-memory hand-over",
-    ("apps/extract.py", "log_layout"): "restructured with the in-memory hand-over",
-    ("cli/design.py", "design"): "the call of apps/design.py's design, whose parameters go with it",
-}
+#: what the two rules below leave alone, each with its reason (none now: design and extract take their
+#: settings objects, DesignSettings and ExtractSettings; issue 72, item 2)
+SPARED: dict[tuple[str, str], str] = {}
 
 
 def _taichi(decorator: ast.expr) -> bool:

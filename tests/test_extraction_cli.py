@@ -229,10 +229,11 @@ def test_a_recording_that_cannot_be_rewritten_keeps_the_results(run_rrd, tmp_pat
 
 def test_the_compare_picture_draws_each_extractors_tendons(run_rrd):
     from tendon_taichi.apps.extract import extract
+    from tendon_taichi.apps.settings import ExtractSettings
     from tendon_taichi.extract.settings import ConsolidationSettings
     from tendon_taichi.io.plots import compare_figure
 
-    ex = extract(run_rrd, ["strands", "path_cover"], record=False, consolidation=ConsolidationSettings(-1.0))
+    ex = extract(run_rrd, ExtractSettings(names=("strands", "path_cover"), consolidation=ConsolidationSettings(-1.0)))
     fig = compare_figure(ex)
     idealized, *panels, _colorbar = fig.axes
     assert len(panels) == 2 and "idealized" in idealized.get_title()
@@ -278,14 +279,15 @@ def test_a_worker_process_consolidates_to_the_same_results(run_rrd):
     """With a worker process consolidating the extractors' tendons beside this one,
     every extractor's tendons, consolidation and figures are the same."""
     from tendon_taichi.apps.extract import extract
+    from tendon_taichi.apps.settings import ExtractSettings
     from tendon_taichi.extract.settings import ConsolidationSettings
     from tendon_taichi.tasks.pool import Pool
 
     names = ["strands", "path_cover", "network_discovery"]
     cons = ConsolidationSettings(refine=0)
-    alone = extract(run_rrd, names, record=False, consolidation=cons)
+    alone = extract(run_rrd, ExtractSettings(names=tuple(names), consolidation=cons))
     with Pool(1) as pool:
-        shared = extract(run_rrd, names, record=False, consolidation=cons, workers=pool)
+        shared = extract(run_rrd, ExtractSettings(names=tuple(names), consolidation=cons), workers=pool)
         assert pool.broken is None
     assert [r.name for r in shared.results] == names
     for a, b in zip(alone.results, shared.results):

@@ -26,7 +26,8 @@ import time
 from pathlib import Path
 
 from tendon_taichi.apps.design import recommended
-from tendon_taichi.extract.settings import FRONT_DEFAULTS, REFINE, SCREEN, ConsolidationSettings
+from tendon_taichi.apps.settings import DesignSettings
+from tendon_taichi.extract.settings import FRONT_DEFAULTS, REFINE, SCREEN, ConsolidationSettings, FrontSettings
 from tendon_taichi.planted.bench import load_suite, score_design, totals, write_outputs
 
 
@@ -34,8 +35,9 @@ def rescore(case: dict, consolidation: ConsolidationSettings, front: dict | None
     """The case designed again from its recording (``front``: the front's ``beam``
     and ``converge``) and scored again."""
     t0 = time.perf_counter()
-    _, _, summary = recommended(case["recording"], consolidation.budget or 0.005, consolidation=consolidation,
-                                **{**FRONT_DEFAULTS, **(front or {})})
+    settings = DesignSettings(consolidation=consolidation, budget=consolidation.budget or 0.005,
+                              front=FrontSettings(**{**FRONT_DEFAULTS, **(front or {})}))
+    _, _, summary = recommended(case["recording"], settings)
     figures = score_design(summary, case["planted_count"], case["length_ratio"])
     return {**case, **figures, "time_s": time.perf_counter() - t0}
 

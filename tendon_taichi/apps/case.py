@@ -19,6 +19,7 @@ from ..body.scene import Scene
 from ..extract.settings import BUDGET, ConsolidationSettings, FrontSettings
 from ..physics import runtime
 from .design import Design, design, start_worker
+from .settings import DesignSettings
 from .optimize import Interrupted
 
 #: what stops a whole run of cases when a case raises it (Ctrl-C inside an in-process case)
@@ -48,11 +49,8 @@ def run_case(scene: Scene, level: int, out: str | Path, settings: CaseSettings =
     ``run.npz``, ``design.json``, ``design.svg``; the pictures with ``settings.png``),
     designed as ``settings`` says."""
     s = settings
-    extractors = None if s.extractors is None else list(s.extractors)
-    return design(scene, level, out, s.solver, s.budget, extractors=extractors,
-                  consolidation=s.consolidation or ConsolidationSettings(budget=s.budget), png=s.png,
-                  beam=s.front.beam, converge=s.front.converge, max_tendons=s.front.max_tendons,
-                  routes_from=s.routes_from)
+    return design(scene, level, out, DesignSettings(s.solver, s.extractors, s.consolidation, s.budget, s.front,
+                                                    png=s.png, routes_from=s.routes_from))
 
 
 def worker_setup(warm: bool = True):

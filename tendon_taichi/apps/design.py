@@ -31,7 +31,7 @@ from ..extract.converge import FineSolves, converge_front
 from ..extract.front import Front, search_front
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.realizable import as_built_arrays
-from ..extract.settings import BEAM, BUDGET, ConsolidationSettings, FrontSettings
+from ..extract.settings import ConsolidationSettings, FrontSettings
 from ..files import check_writable, file_stem, write_json
 from ..io.export import write_as_built
 from ..io.outputs import design_outputs
@@ -44,6 +44,7 @@ from .extract import Extraction, extract, frictionless_error, log_layout
 from .optimize import RunOptions, RunResult, optimize
 from .priors import PriorDesign, prior_layouts, read_prior, route_rows
 from .provenance import result_provenance
+from .settings import DesignSettings, ExtractSettings
 
 #: what the output folder holds
 FILES = ("run.rrd", "run.npz", "as_built.npz", "design.json", "design.png", "front.png")
@@ -171,37 +172,31 @@ def warm_up() -> float:
 
     t0 = time.perf_counter()
     scene = with_overrides(load_scene("t_shape"), {"stage_iterations": 3, "k_min": 0.125})
-    names = [WARM_UP_EXTRACTOR] if WARM_UP_EXTRACTOR in available_extractors() else None
+    names = (WARM_UP_EXTRACTOR,) if WARM_UP_EXTRACTOR in available_extractors() else None
     with tempfile.TemporaryDirectory(prefix="tendon-taichi-warmup-") as tmp:
-        design(scene, 1, tmp, budget=1.0, extractors=names,
-               consolidation=ConsolidationSettings(tolerance=-1.0, refine=0), png=False, converge=False)
+        quick = DesignSettings(budget=1.0, extractors=names, png=False, front=FrontSettings(converge=False),
+                               consolidation=ConsolidationSettings(tolerance=-1.0, refine=0))
+        design(scene, 1, tmp, quick)
     return time.perf_counter() - t0
 
 
-def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: str = "auto",
-           budget: float = BUDGET, max_tendons: int | None = None, extractors: list[str] | None = None,
-           consolidation: ConsolidationSettings | None = None, progress: Progress | None = None,
-           plugin_timeout: float | None = None, png: bool = True, beam: int = BEAM,
-           converge: bool = True, workers: int = 0, routes_from: str | Path | None = None,
-           min_capstan: float = 0.0) -> Design:
+def design(scene: Scene, level: int = 1, out: str | Path | None = None, settings: DesignSettings = DesignSettings(),
+           progress: Progress | None = None, workers: int = 0) -> Design:
     """The main job (module docstring) on ``scene`` at ``level`` into the folder
-    ``out`` (default :func:`default_out`); ``budget`` (fraction of L) both bounds
-    consolidation (unless ``consolidation`` says otherwise) and picks the
-    recommendation; ``png`` draws design.png and front.png; ``beam`` and ``converge``
-    as for :func:`recommended`; ``workers`` processes (started at once, warming up
-    while the contractions are optimized) share the consolidations and the front's
-    solves and route optimizations - the same design, sooner where there are idle
-    cores (from a script: under ``if __name__ == "__main__":``, as
-    :mod:`~tendon_taichi.tasks.pool` says); ``routes_from``, a prior design of the
-    same body (its folder or ``design.json``, checked before anything is computed),
-    whose front's layouts the front searches from too (:mod:`.priors`);
-    ``min_capstan``, the least worst capstan factor the recommendation accepts
-    (:func:`recommend`). Goals out of reach of the budget end it after the
-    optimization (:func:`check_reach`). Its factorizations run on one thread where
-    it starts workers (:func:`design_threads`), theirs too."""
+    ``out`` (default :func:`default_out`), made and chosen as ``settings`` say
+    (:class:`~.settings.DesignSettings`: the budget both bounds consolidation, unless
+    its settings say otherwise, and picks the recommendation; ``routes_from`` is
+    checked before anything is computed, :mod:`.priors`); ``workers`` processes
+    (started at once, warming up while the contractions are optimized) share the
+    consolidations and the front's solves and route optimizations - the same
+    design, sooner where there are idle cores (from a script: under ``if __name__
+    == "__main__":``, as :mod:`~tendon_taichi.tasks.pool` says). Goals out of reach
+    of the budget end it after the optimization (:func:`check_reach`). Its
+    factorizations run on one thread where it starts workers
+    (:func:`design_threads`), theirs too."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
-    prior = None if routes_from is None else read_prior(routes_from, scene)
+    prior = None if settings.routes_from is None else read_prior(settings.routes_from, scene)
     out = Path(out) if out is not None else default_out(scene, level)
     for name in design_files(scene.body.dim):
         check_writable(out / name, "output")
@@ -210,17 +205,17 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, solver: 
     with Pool(workers, start_worker, (here["threads"], here["arch"])) as pool:
         progress.message(f"design: optimizing {scene.name} at level {level}"
                          + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
-        run = optimize(scene, level, solver, record=out / "run.rrd", progress=progress,
+        run = optimize(scene, level, settings.solver, record=out / "run.rrd", progress=progress,
                        options=RunOptions(export=out / "run.npz", factor_threads=threads))
-        check_reach(run, budget)
+        check_reach(run, settings.budget)
         for w in run.warnings:  # now, not only with the design: the search may take long
             progress.message(f"design: warning: {w}")
-        ex, layout, summary = recommended(run.held, budget, max_tendons, extractors, consolidation, progress,
-                                          plugin_timeout, beam, converge, pool, prior, min_capstan, threads)
+        ex, layout, summary = recommended(run.held, settings, progress, workers=pool, prior=prior,
+                                          factor_threads=threads)
         summary["timing"]["optimize_s"] = run.summary["time_s"]
         summary["timing"]["workers"] = workers
         summary["warnings"] = list(run.warnings) + _budget_warning(summary)
-        summary["files"] = _write(out, ex, layout, summary, png, pool)
+        summary["files"] = _write(out, ex, layout, summary, png=settings.png, pool=pool)
     if pool.broken:
         progress.message(f"design: {pool.broken}")
     summary["time_s"] = time.perf_counter() - t0
@@ -262,31 +257,32 @@ def _rounded_up(x: float) -> float:
     return r
 
 
-def recommended(recording: str | Path | RecordedRun, budget: float = BUDGET, max_tendons: int | None = None,
-                extractors: list[str] | None = None, consolidation: ConsolidationSettings | None = None,
-                progress: Progress | None = None, plugin_timeout: float | None = None, beam: int = BEAM,
-                converge: bool = True, workers: Pool | None = None, prior: PriorDesign | None = None,
-                min_capstan: float = 0.0, factor_threads: int | None = None) -> tuple[Extraction, Layout, dict]:
-    """Every extractor on a recorded run's last stage (``recording``: its path, or the
-    run read or held in memory, as :func:`~.extract.extract` takes it), consolidated
-    and routed, the count/error front searched from all their routes
-    (:func:`search_front`), each front entry solved again on the next finer mesh
-    (``converge``), and the layout recommended (:func:`recommend`, with
-    ``min_capstan``): the extraction, the layout and the summary ``design.json``
-    holds (no file is written). ``workers`` (a pool of worker
-    processes) share the consolidations and the front's independent pieces;
-    ``prior``'s front layouts (:func:`~.priors.read_prior`) join the front's seeds;
-    every factorization runs on ``factor_threads`` (None: the process's)."""
+def recommended(recording: str | Path | RecordedRun, settings: DesignSettings = DesignSettings(),
+                progress: Progress | None = None, workers: Pool | None = None, prior: PriorDesign | None = None,
+                factor_threads: int | None = None) -> tuple[Extraction, Layout, dict]:
+    """Every extractor of ``settings`` on a recorded run's last stage (``recording``:
+    its path, or the run read or held in memory, as :func:`~.extract.extract` takes
+    it), consolidated and routed, the count/error front searched from all their
+    routes (:func:`search_front`), each front entry solved again on the next finer
+    mesh (``settings.front.converge``), and the layout recommended
+    (:func:`recommend`): the extraction, the layout and the summary ``design.json``
+    holds (no file is written; ``settings.png`` and ``routes_from`` are not read).
+    ``workers`` (a pool of worker processes) share the consolidations and the
+    front's independent pieces; ``prior``'s front layouts
+    (:func:`~.priors.read_prior`) join the front's seeds; every factorization runs
+    on ``factor_threads`` (None: the process's)."""
     t0 = time.perf_counter()
     progress = progress or Progress(enabled=False)
-    cons = consolidation or ConsolidationSettings(budget=budget)
-    kwargs = {} if plugin_timeout is None else {"plugin_timeout": plugin_timeout}
+    cons = settings.consolidating
+    budget, max_tendons, min_capstan = settings.budget, settings.front.max_tendons, settings.min_capstan
+    converge = settings.front.converge
+    how = ExtractSettings(names=settings.extractors, consolidation=cons, factor_threads=factor_threads,
+                          **({} if settings.plugin_timeout is None else {"plugin_timeout": settings.plugin_timeout}))
 
     def log(text: str) -> None:
         progress.message(f"design: {text}")
 
-    ex = extract(recording, extractors, solver="recorded", record=False, consolidation=cons, log=log,
-                 workers=workers, factor_threads=factor_threads, **kwargs)
+    ex = extract(recording, how, log=log, workers=workers)
     extract_s = time.perf_counter() - t0
     problem, solver = ex.problem, ex.solver
     done = [r.consolidation for r in ex.results if r.error is None and r.consolidation is not None]
@@ -299,17 +295,18 @@ def recommended(recording: str | Path | RecordedRun, budget: float = BUDGET, max
         log(f"{len(priors)} of the {len(prior.layouts)} layouts of '{prior.path}' join the front's seeds")
     finer = FinerMesh(problem, ex.run.settings, solver, workers) if converge else None
     front = search_front(Context(problem, ex.state, ex.run.settings, solver, log=log, workers=workers), done, cons,
-                         FrontSettings(beam=beam, max_tendons=max_tendons), priors=priors,
+                         settings.front, priors=priors,
                          on_finished=None if finer is None else finer.offer)
     if not front.layouts:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)" if max_tendons
                          else "no extractor's tendons make a layout of one tendon or more" + _pattern_said(ex))
-    fine = finer_mesh_errors(ex, front, cons, solver, log, workers, finer) if converge else None
+    fine = finer_mesh_errors(ex, front, cons, log, workers=workers, finer=finer) if converge else None
     rows = front_rows(front, fine, ms.mu, ms.kink_angle)
     chosen = recommend(rows, budget, max_tendons, min_capstan)
     layout = front.layouts[chosen["count"]]
-    summary = _summary(ex, layout, chosen, rows, budget, max_tendons, min_capstan, ms)
-    summary["search"] = {**front.as_json(), "beam": beam, "routes_from": None if prior is None else str(prior.path),
+    summary = _summary(ex, layout, chosen, rows, settings, ms=ms)
+    summary["search"] = {**front.as_json(), "beam": settings.front.beam,
+                         "routes_from": None if prior is None else str(prior.path),
                          "converged_resolution": None if fine is None else fine["resolution"],
                          **({"converge_error": fine["error"]} if fine and fine.get("error") else {})}
     summary["timing"].update(extract_s=extract_s, front_s=front.time_s,
@@ -362,16 +359,17 @@ class FinerMesh:
             self.solves.offer(layout)
 
 
-def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings, solver: str, log,
+def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings, log,
                       workers: Pool | None = None, finer: FinerMesh | None = None) -> dict:
-    """The front's layouts solved on the next finer mesh (level + 1; ``finer``, where
+    """The front's layouts solved, with the extraction's linear solver, on the next
+    finer mesh (level + 1; ``finer``, where
     it was built before the front was searched), kept monotone there
     (:func:`converge_front`): ``resolution``, ``results`` (per count its as-built
     robot there, None where it could not be solved), ``time_s`` (from here on, and
     the mesh's building), and ``error`` when that mesh could not be built (too
     large for this machine, or its scene file is gone)."""
     t0 = time.perf_counter()
-    level = ex.problem.level + 1
+    level, solver = ex.problem.level + 1, ex.solver
     out = {"resolution": level, "results": {}, "time_s": 0.0}
     log(f"re-solving the front on the level-{level} mesh")
     finer = finer or FinerMesh(ex.problem, ex.run.settings, solver, workers)
@@ -384,8 +382,9 @@ def finer_mesh_errors(ex: Extraction, front: Front, cons: ConsolidationSettings,
     return out
 
 
-def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], budget: float, max_tendons,
-             min_capstan: float, ms: MetricSettings) -> dict:
+def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], settings: DesignSettings,
+             ms: MetricSettings) -> dict:
+    budget, max_tendons, min_capstan = settings.budget, settings.front.max_tendons, settings.min_capstan
     problem, run = ex.problem, ex.run
     tendons = layout.tendons()
     real = layout.realizable
@@ -394,7 +393,7 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], bud
                    realizable_pose_error_rel=chosen["realizable_pose_error_rel"],
                    realizable_pose_error_rel_level=real.pose_error_rel,
                    realizable_pose_error_rel_frictionless=frictionless_error(
-                       problem, tendons, ex.state, run.settings, ex.solver, real),
+                       problem, tendons, ex.state, run.settings, ex.solver, real=real),
                    idealized_pose_error_rel=ex.idealized_pose_error / problem.size)
     if real.poses is not None:
         metrics["realizable_pose_errors_rel"] = [r.pose_error_rel for r in real.poses]
@@ -443,7 +442,7 @@ def _write(out: Path, ex: Extraction, layout: Layout, summary: dict, png: bool, 
     def add(rr, rec) -> None:
         rec.set_time("stage", sequence=stage)
         rec.set_time("iteration", sequence=int(run.stages[stage].summary.get("step", 0)))
-        log_layout(rr, rec, "/design/routes", problem, tendons, layout.realizable)
+        log_layout(rr, rec, "/design/routes", problem, tendons, real=layout.realizable)
         rec.log("/design/summary", rr.TextDocument(json.dumps(summary), media_type="text/plain"))
 
     rewrite(run.path, run.meta.get("run_id"), lambda ch: not ch.entity_path.startswith("/design/"), add)

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..body.problem import Problem
 from ..errors import ConvergenceError, InputError
-from ..extract.checks import PLUGIN_TIMEOUT, call_plugin, check_tendons, read_only_copy
+from ..extract.checks import call_plugin, check_tendons, read_only_copy
 from ..extract.consolidation import Consolidation, ConsolidationSettings, consolidate
 from ..extract.context import Context
 from ..extract.metrics import MetricSettings, tendon_metrics
@@ -29,6 +29,7 @@ from ..optimizer.soft_ik import state_solver
 from ..physics.model import Model
 from ..solve.linear import LinearSettings
 from ..tasks.pool import Pool
+from .settings import ExtractSettings
 
 
 @dataclass
@@ -106,29 +107,32 @@ def idealized_state(run: RecordedRun, problem: Problem, stage: int, solver: str)
         newton = state_solver(model, solver)
         for ac in acs:
             eq = newton.solve(ac=ac, x0=problem.mesh.nodes)
-            poses.append(IdealizedState(eq.tau, ac, eq.x, thr, stage, k))
+            poses.append(IdealizedState(eq.tau, ac, eq.x, thr, stage, k=k))
     else:
         for ac, x in zip(acs, rs.xs):
-            poses.append(IdealizedState(model.tensions_at(ac, x), ac, np.array(x), thr, stage, k))
-    return IdealizedState(rs.tau, acs.max(axis=0), poses[0].x, thr, stage, k,
-                          poses if len(poses) > 1 else None)
+            poses.append(IdealizedState(model.tensions_at(ac, x), ac, np.array(x), thr, stage, k=k))
+    return IdealizedState(rs.tau, acs.max(axis=0), poses[0].x, thr, stage, k=k,
+                          poses=poses if len(poses) > 1 else None)
 
 
-def run_extractor(name: str, problem: Problem, state: IdealizedState, options: dict | None,
-                  run: RecordedRun, solver: str, metric_settings: MetricSettings,
-                  consolidation: ConsolidationSettings | None = None,
-                  timeout: float = PLUGIN_TIMEOUT, log=None, done: dict | None = None) -> ExtractorResult:
-    """Run one extractor on read-only copies of ``problem`` and ``state`` (for at
-    most ``timeout`` s), check its tendons (:mod:`~tendon_taichi.extract.checks`),
-    turn them into routes, consolidate and optimize them on the as-built robot
-    (:mod:`~tendon_taichi.extract.consolidation`) and score them; a failing plugin
-    gives a result with ``error`` instead of raising. ``log(text)`` hears when the
+def run_extractor(name: str, context: Context, run: RecordedRun, settings: ExtractSettings,
+                  done: dict | None = None) -> ExtractorResult:
+    """Run one extractor on read-only copies of the context's problem and state
+    (with its options in ``settings``, for at most ``settings.plugin_timeout`` s),
+    check its tendons (:mod:`~tendon_taichi.extract.checks`), turn them into
+    routes, consolidate and optimize them on the as-built robot with the context's
+    solver (:mod:`~tendon_taichi.extract.consolidation`, ``settings.consolidation``)
+    and score them (``settings.metric_settings``, given); a failing plugin gives a
+    result with ``error`` instead of raising. The context's log hears when the
     plugin starts, of consolidation's steps and of the result. ``done`` maps the
     tendons of extractors run before (their waypoints) to their consolidation:
     the same tendons are not consolidated twice."""
     t0 = time.perf_counter()
+    problem, state, solver, log = context.problem, context.state, context.solver, context.log
+    options, timeout = (settings.options or {}).get(name), settings.plugin_timeout
+    consolidation, metric_settings = settings.consolidation, settings.metric_settings
     say = log or (lambda text: None)
-    found = _plugin_tendons(name, problem, state, options, timeout, say)
+    found = _plugin_tendons(name, problem, state, options, timeout, say=say)
     if isinstance(found, ExtractorResult):
         return replace(found, time_s=time.perf_counter() - t0)
     key = _key(found)
@@ -136,10 +140,11 @@ def run_extractor(name: str, problem: Problem, state: IdealizedState, options: d
         cons = done[key].relabel(name)
         say(f"{name}: the same tendons as {done[key].layout.source}")
     else:
-        cons = _consolidated(problem, found, state, run.settings, consolidation, solver, name, log)
+        cons = _consolidated(problem, found, state, run.settings, consolidation, solver=solver, name=name,
+                             log=log)
     if done is not None and not isinstance(cons, str):
         done.setdefault(key, cons)
-    return _scored(name, problem, state, cons, run, solver, metric_settings, t0, say)
+    return _scored(name, problem, state, cons, run, solver=solver, metric_settings=metric_settings, t0=t0, say=say)
 
 
 def _key(tendons: list[Tendon]) -> tuple:
@@ -183,7 +188,8 @@ def _consolidate_task(spec: tuple, job: tuple[str, list[Tendon]]) -> tuple[Conso
     extractor's name and tendons), with the seconds it took."""
     t0 = time.perf_counter()
     problem, state, settings, consolidation, solver = spec
-    return _consolidated(problem, job[1], state, settings, consolidation, solver, job[0]), time.perf_counter() - t0
+    cons = _consolidated(problem, job[1], state, settings, consolidation, solver=solver, name=job[0])
+    return cons, time.perf_counter() - t0
 
 
 def _scored(name: str, problem: Problem, state: IdealizedState, cons: Consolidation | str, run: RecordedRun,
@@ -199,7 +205,7 @@ def _scored(name: str, problem: Problem, state: IdealizedState, cons: Consolidat
     ideal = run.stages[state.stage].summary["pose_error"]
     metrics.update(realizable_pose_error=real.pose_error, realizable_pose_error_rel=real.pose_error_rel,
                    realizable_pose_error_rel_frictionless=frictionless_error(problem, tendons, state, run.settings,
-                                                                             solver, real),
+                                                                             solver, real=real),
                    idealized_pose_error_rel=ideal / L,
                    realizable_ratio=real.pose_error / ideal if ideal > 0 else float("inf"))
     metrics["extracted_count"] = cons.extracted_count
@@ -220,7 +226,7 @@ def _run_shared(names: list[str], problem: Problem, state: IdealizedState, optio
     found, plugin_s = {}, {}
     for n in names:
         t0 = time.perf_counter()
-        found[n] = _plugin_tendons(n, problem, state, options.get(n), timeout, say)
+        found[n] = _plugin_tendons(n, problem, state, options.get(n), timeout, say=say)
         plugin_s[n] = time.perf_counter() - t0
     first: dict[tuple, str] = {}
     for n in names:
@@ -242,7 +248,7 @@ def _run_shared(names: list[str], problem: Problem, state: IdealizedState, optio
             cons = cons.relabel(n)
             say(f"{n}: the same tendons as {source}")
         start = time.perf_counter() - plugin_s[n] - (took if source == n else 0.0)
-        results.append(_scored(n, problem, state, cons, run, solver, ms, start, say))
+        results.append(_scored(n, problem, state, cons, run, solver=solver, metric_settings=ms, t0=start, say=say))
     return results
 
 
@@ -257,27 +263,25 @@ def frictionless_error(problem: Problem, tendons: list[Tendon], state: Idealized
     return solve_realizable_poses(Context(bare, state, settings, solver), tendons, real.ratios).pose_error_rel
 
 
-def extract(path: str | Path | RecordedRun, names: list[str] | None = None, stage: int | None = None,
-            options: dict[str, dict] | None = None, solver: str = "recorded",
-            metric_settings: MetricSettings | None = None, record: bool | str | Path = False,
-            consolidation: ConsolidationSettings | None = None, on_wait=None,
-            plugin_timeout: float = PLUGIN_TIMEOUT, friction: float | None = None,
-            clearance: float | None = None, log=None, workers: Pool | None = None,
-            factor_threads: int | None = None) -> Extraction:
-    """Run extractors (default: every installed one, each for at most
-    ``plugin_timeout`` s) on a recorded stage (default: the last completed), each
-    followed by consolidation (default settings unless ``consolidation`` is
-    given); ``friction`` and ``clearance`` replace the scene's [tendons] settings
-    where given. The recording is only read, unless ``record`` asks to log the
+def extract(path: str | Path | RecordedRun, settings: ExtractSettings = ExtractSettings(),
+            record: bool | str | Path = False, on_wait=None, log=None, workers: Pool | None = None) -> Extraction:
+    """Run the extractors of ``settings`` (:class:`~.settings.ExtractSettings`;
+    default: every installed one, each for at most ``plugin_timeout`` s) on a
+    recorded stage (default: the last completed), each followed by consolidation;
+    its ``friction`` and ``clearance`` replace the scene's [tendons] settings where
+    given. The recording is only read, unless ``record`` asks to log the
     tendons: True into the recording itself, a path into a file of their own that
     the viewer shows with the run (:func:`log_tendons`; ``on_wait`` is called if
     another process is writing; when that fails, the results are kept and
     ``record_error`` says why). ``workers`` (a pool of worker processes) share the
     consolidations (the same results); every factorization, theirs too, runs on
-    ``factor_threads`` (None: each process's own). ``path`` is the recording's
+    ``settings.factor_threads`` (None: each process's own). ``path`` is the recording's
     path, or the run already read
     (:func:`~tendon_taichi.io.recording.read_recording`) or handed on in memory
     (:class:`~tendon_taichi.io.recording.HeldRun`: the file is not read again)."""
+    s = settings
+    stage, names, options = s.stage, s.names, s.options
+    consolidation, plugin_timeout = s.consolidation, s.plugin_timeout
     run = path if isinstance(path, RecordedRun) else read_recording(path)
     target = record_target(run, record)
     if not run.stages:
@@ -291,18 +295,19 @@ def extract(path: str | Path | RecordedRun, names: list[str] | None = None, stag
     unknown_opts = set(options) - set(names)
     if unknown_opts:
         raise InputError(f"options given for extractor(s) not run: {', '.join(sorted(unknown_opts))}")
-    solver = LinearSettings(run.meta.get("solver", "auto") if solver == "recorded" else solver, factor_threads)
-    problem = run.problem().with_tendons(friction=friction, clearance=clearance)
+    solver = LinearSettings(run.meta.get("solver", "auto") if s.solver == "recorded" else s.solver, s.factor_threads)
+    problem = run.problem().with_tendons(friction=s.friction, clearance=s.clearance)
     state = idealized_state(run, problem, stage, solver)
-    ms = metric_settings or MetricSettings(mu=problem.scene.tendons.friction)
+    ms = s.metric_settings or MetricSettings(mu=problem.scene.tendons.friction)
     if workers is not None and workers.active and len(names) > 1:
-        results = _run_shared(names, problem, state, options, run, solver, ms, consolidation, plugin_timeout, log,
-                              workers)
+        results = _run_shared(names, problem, state, options, run, solver=solver, ms=ms, consolidation=consolidation,
+                              timeout=plugin_timeout, log=log, workers=workers)
     else:
         done: dict = {}
-        results = [run_extractor(n, problem, state, options.get(n), run, solver, ms, consolidation, plugin_timeout,
-                                 log, done) for n in names]
-    out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results, solver=solver)
+        context, how = Context(problem, state, run.settings, solver, log=log), replace(s, metric_settings=ms)
+        results = [run_extractor(n, context, run, how, done) for n in names]
+    out = Extraction(run, problem, stage, state, run.stages[stage].summary["pose_error"], results=results,
+                     solver=solver)
     if target is not None and any(r.error is None for r in results):
         try:
             log_tendons(out, on_wait, target)
@@ -361,7 +366,7 @@ def log_tendons(ex: Extraction, on_wait=None, target: str | Path | None = None) 
         rec.set_time("iteration", sequence=int(ex.run.stages[ex.stage].summary.get("step", 0)))
         for r in ex.results:
             if r.error is None:
-                log_layout(rr, rec, f"/tendons/{r.name}", ex.problem, r.tendons, r.realizable)
+                log_layout(rr, rec, f"/tendons/{r.name}", ex.problem, r.tendons, real=r.realizable)
                 rec.log(f"/tendons/{r.name}/summary", rr.TextDocument(json.dumps(r.as_json()),
                                                                       media_type="text/plain"))
 

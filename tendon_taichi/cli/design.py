@@ -68,6 +68,8 @@ def table(summary: dict) -> list[str]:
 
 def cmd_design(args) -> int:
     from ..apps.design import default_workers, design
+    from ..apps.settings import DesignSettings
+    from ..extract.settings import FrontSettings
     from ..body.scene import load_scene, with_overrides
     from ..io.progress import Progress
 
@@ -77,10 +79,11 @@ def cmd_design(args) -> int:
     cons = consolidation(args, budget=budget)
     timeout = plugin_timeout(args)
     scene = with_overrides(load_scene(args.scene), optimize_overrides(args)).with_tendons(**tendons)
-    result = design(scene, args.level, args.out, args.solver, budget, max_tendons, args.extractors, cons,
-                    Progress(enabled=not args.quiet), plugin_timeout=timeout, png=not args.no_png,
-                    workers=default_workers() if args.workers is None else args.workers,
-                    routes_from=args.routes_from, min_capstan=args.min_capstan, **front)
+    settings = DesignSettings(args.solver, None if args.extractors is None else tuple(args.extractors), cons, budget,
+                              FrontSettings(max_tendons=max_tendons, **front), min_capstan=args.min_capstan,
+                              plugin_timeout=timeout, png=not args.no_png, routes_from=args.routes_from)
+    result = design(scene, args.level, args.out, settings, Progress(enabled=not args.quiet),
+                    workers=default_workers() if args.workers is None else args.workers)
     summary = result.summary
     for w in summary["warnings"]:
         print(f"{PROG}: warning: {w}", file=sys.stderr)

@@ -136,8 +136,8 @@ def add_front_flags(p: argparse.ArgumentParser) -> None:
 
 
 def front_settings(args) -> dict:
-    """``beam`` and ``converge`` of the command line, validated (keyword arguments
-    of :func:`tendon_taichi.apps.design.design`)."""
+    """``beam`` and ``converge`` of the command line, validated (fields of
+    :class:`~tendon_taichi.extract.settings.FrontSettings`)."""
     if args.beam < 1:
         raise InputError(f"--beam must be an integer >= 1 (got {args.beam})")
     return {"beam": args.beam, "converge": not args.no_converge}
@@ -189,11 +189,13 @@ def _progress(args, command: str):
 
 def cmd_extract(args) -> int:
     from ..apps.extract import extract
+    from ..apps.settings import ExtractSettings
 
     options = _parse_options(args.option, args.extractor)
-    ex = extract(args.recording, [args.extractor], stage=args.stage, options=options, solver=args.solver,
-                 record=record(args), consolidation=consolidation(args), on_wait=_waiting(args),
-                 plugin_timeout=plugin_timeout(args), log=_progress(args, "extract"), **tendon_settings(args))
+    how = ExtractSettings(names=(args.extractor,), stage=args.stage, options=options, solver=args.solver,
+                          consolidation=consolidation(args), plugin_timeout=plugin_timeout(args),
+                          **tendon_settings(args))
+    ex = extract(args.recording, how, record=record(args), on_wait=_waiting(args), log=_progress(args, "extract"))
     r = ex.results[0]
     if r.error is not None:
         raise TendonError(r.error)
@@ -211,11 +213,13 @@ def cmd_extract(args) -> int:
 
 def cmd_compare(args) -> int:
     from ..apps.extract import extract
+    from ..apps.settings import ExtractSettings
 
-    ex = extract(args.recording, args.extractors, stage=args.stage, options=_parse_options(args.option, None),
-                 solver=args.solver, record=record(args), consolidation=consolidation(args),
-                 on_wait=_waiting(args), plugin_timeout=plugin_timeout(args), log=_progress(args, "compare"),
-                 **tendon_settings(args))
+    how = ExtractSettings(names=None if args.extractors is None else tuple(args.extractors), stage=args.stage,
+                          options=_parse_options(args.option, None), solver=args.solver,
+                          consolidation=consolidation(args), plugin_timeout=plugin_timeout(args),
+                          **tendon_settings(args))
+    ex = extract(args.recording, how, record=record(args), on_wait=_waiting(args), log=_progress(args, "compare"))
     return _extraction_output(args, ex)
 
 

@@ -19,12 +19,11 @@ that of the elements and the segments alone, and its ordering - the
 elements' - is computed once per mesh and shared by every tendon layout.
 
 When a route moves (route optimization), a few of its points cross into other
-triangles; a new pattern would need a new analysis of the factorization,
-which costs more than its numbers. Where the current pattern
-lacks the entries of at most :data:`DETACHED_MAX` segments it is kept, and
-those segments are *detached* (:meth:`DirectSolver._reattach`): each one's
-rank-one block is split into a part within its points' triangles, which every
-pattern holds, and one more low-rank column."""
+triangles; a new pattern would need a new analysis of the factorization, which
+costs more than its numbers. Where the current pattern lacks the entries of at
+most :data:`DETACHED_MAX` segments it is kept, and those segments are *detached*
+(:meth:`DirectSolver._reattach`): each one's rank-one block is split into a part
+within its points' triangles, which every pattern holds, and one more column."""
 
 from __future__ import annotations
 
@@ -191,10 +190,9 @@ class _Pattern:
 
 @probe("indefinite")
 def _indefinite(pattern: _Pattern) -> PardisoLDL | None:
-    """The pattern's PARDISO indefinite factorization (on the threads asked of its
-    Cholesky), made the first time a matrix of it is not positive definite (a new
-    pattern's Cholesky almost always succeeds); None where its Cholesky is qdldl's
-    (no MKL)."""
+    """The pattern's PARDISO indefinite factorization (its Cholesky's threads), made the
+    first time a matrix of it is not positive definite (a new pattern's Cholesky almost
+    always succeeds); None where its Cholesky is qdldl's (no MKL)."""
     if pattern.indefinite is None and isinstance(pattern.ldl, PardisoLDL):
         pattern.indefinite = PardisoLDL(pattern.indptr, pattern.indices, len(pattern.indptr) - 1,
                                         pattern.reorder, indefinite=True, threads=pattern.ldl.asked_threads)
@@ -208,9 +206,8 @@ class DirectSolver(LinearSolver):
     The sparsity pattern (free DOFs only) and the scatter map from element and
     cable entries to it are built once; an assembly then only computes values.
     ``ordered=False`` keeps the free DOFs' own numbering (node by node, x then y)
-    instead of a fill-reducing order, for assembly without factorization.
-    ``factor_threads``: the threads its factorizations run on (None: the
-    process's; :class:`~tendon_taichi.solve.pardiso.PardisoLDL`)."""
+    instead of a fill-reducing order, for assembly without factorization; its
+    factorizations run on ``factor_threads`` (None: the process's)."""
 
     name = "direct"
     fresh_solves = True
