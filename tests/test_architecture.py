@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: the layers, bottom first; a module may import its own layer and the ones below
 LAYERS = [
     ("tendon_taichi.version", "tendon_taichi.errors", "tendon_taichi.files", "tendon_taichi.tables",
+     "tendon_taichi.dimensions",
      "tendon_taichi.probes", "tendon_taichi._lazy"),
     ("tendon_taichi.tasks",),
     ("tendon_taichi.objective",),

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+from ..dimensions import PerDimension
 from ..errors import SceneError
 from .fibers import FiberGraph, build_lattice
 from .mesh import Mesh
@@ -43,14 +44,12 @@ class Dimension:
 PLANE = Dimension(2, "triangle", plane_mesh, plane_walls, build_lattice)
 
 #: the dimensions bodies may have, by ``dim``
-DIMENSIONS: dict[int, Dimension] = {PLANE.dim: PLANE}
+DIMENSIONS = PerDimension("dimension", {PLANE.dim: PLANE})
 
 
 def register_dimension(dimension: Dimension) -> Dimension | None:
     """Make ``dimension`` the one of its ``dim``; returns the one it replaces, if any."""
-    before = DIMENSIONS.get(dimension.dim)
-    DIMENSIONS[dimension.dim] = dimension
-    return before
+    return DIMENSIONS.register(dimension.dim, dimension)
 
 
 def dimension_of(scene: Scene) -> Dimension:
@@ -58,6 +57,5 @@ def dimension_of(scene: Scene) -> Dimension:
     clear line where none is registered for it."""
     dim = scene.body.dim
     if dim not in DIMENSIONS:
-        known = ", ".join(f"{d}D" for d in sorted(DIMENSIONS))
-        raise SceneError(f"{scene.origin}: a {dim}D body cannot be built (bodies may be {known})")
+        raise SceneError(f"{scene.origin}: a {dim}D body cannot be built (bodies may be {DIMENSIONS.known()})")
     return DIMENSIONS[dim]

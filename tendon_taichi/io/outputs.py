@@ -8,6 +8,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from ..dimensions import PerDimension
+
 
 @dataclass(frozen=True)
 class DesignOutputs:
@@ -44,18 +46,14 @@ def _plot_design(path, problem, tendons, realizable, title: str) -> Path:
 PLANE = DesignOutputs(2, "design.svg", _write_svg, _plot_design)
 
 #: the outputs of each dimension, by ``dim``
-OUTPUTS: dict[int, DesignOutputs] = {PLANE.dim: PLANE}
+OUTPUTS = PerDimension("design outputs", {PLANE.dim: PLANE})
 
 
 def register_outputs(outputs: DesignOutputs) -> DesignOutputs | None:
     """Make ``outputs`` the ones of its ``dim``; returns the ones it replaces, if any."""
-    before = OUTPUTS.get(outputs.dim)
-    OUTPUTS[outputs.dim] = outputs
-    return before
+    return OUTPUTS.register(outputs.dim, outputs)
 
 
 def design_outputs(dim: int) -> DesignOutputs:
     """The :class:`DesignOutputs` of a ``dim``-dimensional body."""
-    if dim not in OUTPUTS:
-        raise KeyError(f"no design outputs for a {dim}D body (registered: {sorted(OUTPUTS)})")
-    return OUTPUTS[dim]
+    return OUTPUTS.of(dim)

@@ -10,14 +10,13 @@ from __future__ import annotations
 
 from types import ModuleType
 
+from ..dimensions import PerDimension
 from . import forces
 
 #: the element kernels of each dimension, by ``dim``: 2D, Neo-Hookean triangles (forces.py)
-ELEMENTS: dict[int, ModuleType] = {2: forces}
+ELEMENTS = PerDimension("element kernels", {2: forces})
 
 
 def element_kernels(dim: int) -> ModuleType:
     """The element kernels of a ``dim``-dimensional mesh (:data:`ELEMENTS`)."""
-    if dim not in ELEMENTS:
-        raise KeyError(f"no element kernels for a {dim}D mesh (registered: {sorted(ELEMENTS)})")
-    return ELEMENTS[dim]
+    return ELEMENTS.of(dim)
