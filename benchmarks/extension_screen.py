@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/extension_screen.py SCENE [LEVEL] [DESIGN FLAGS ...]
 
-Runs ``tendon-taichi design SCENE --resolution LEVEL --workers 0`` (default
+Runs ``tendon-taichi design SCENE --level LEVEL --workers 0`` (default
 level 1, and any further ``design`` flags given) in this process, into a
 temporary folder. Each extension the front tries is screened, as the front
 does (one round of at most ``EXTEND_SCREEN`` SLSQP iterations), and also
@@ -83,7 +83,7 @@ def report() -> None:
 def run(argv: list[str]) -> int:
     scene, level, flags, _ = scene_args(argv)
     with around("screened", _screened), around("continued", _continued), tempfile.TemporaryDirectory() as tmp:
-        rc = main(["design", scene, "--resolution", level, "--workers", "0", "--out", tmp, *flags])
+        rc = main(["design", scene, "--level", level, "--workers", "0", "--out", tmp, *flags])
     report()
     return rc
 

@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/realizable_side_by_side.py SCENE [LEVEL] [DESIGN FLAGS ...]
 
-Runs ``tendon-taichi design SCENE --resolution LEVEL`` (default level 1, and
+Runs ``tendon-taichi design SCENE --level LEVEL`` (default level 1, and
 any further ``design`` flags given) in this process, into a temporary folder,
 and solves every realizable robot the design solves twice more from the same
 start - by bounded Gauss-Newton (what ``solve_realizable`` uses) and by
@@ -68,7 +68,7 @@ if __name__ == "__main__":
     scene, rest = sys.argv[1], sys.argv[2:]
     level = rest.pop(0) if rest and rest[0].isdigit() else "1"
     with around("solve_realizable", _both), tempfile.TemporaryDirectory() as out:
-        code = main(["design", scene, "--resolution", level, "--out", out, "--quiet", "--workers", "0", "--no-png",
+        code = main(["design", scene, "--level", level, "--out", out, "--quiet", "--workers", "0", "--no-png",
                      *rest])
     if code:
         sys.exit(code)

@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/route_gradients.py SCENE [LEVEL] [DESIGN FLAGS ...] [--repeat N]
 
-Runs ``tendon-taichi design SCENE --resolution LEVEL --workers 0`` (default
+Runs ``tendon-taichi design SCENE --level LEVEL --workers 0`` (default
 level 1, and any further ``design`` flags given) in this process and keeps the
 arguments of every route optimization it makes (``route_replay.record``).
 Then it runs them all again N times (default 2) each way, alternating: with
@@ -62,7 +62,7 @@ def replay(calls: list[tuple], every_point: bool) -> tuple[float, int, int, list
 
 def run(argv: list[str]) -> None:
     scene, level, flags, repeat = scene_args(argv, repeat=2)
-    calls = record([scene, "--resolution", level, *flags])
+    calls = record([scene, "--level", level, *flags])
     runs = alternating(calls, WAYS, replay, repeat)
     print(f"route optimizations: {len(calls)} ({scene} level {level})")
     for label, done in runs.items():

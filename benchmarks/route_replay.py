@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/route_replay.py SCENE [LEVEL] [DESIGN FLAGS ...] [--repeat N]
 
-Runs ``tendon-taichi design SCENE --resolution LEVEL --workers 0`` (default
+Runs ``tendon-taichi design SCENE --level LEVEL --workers 0`` (default
 level 1, and any further ``design`` flags given) in this process, into a
 temporary folder, and keeps the arguments of every route optimization it makes.
 Then it runs them all again N times (default 2) with each setting of the direct
@@ -166,7 +166,7 @@ def alternating(calls: list[tuple], settings: dict, replay, repeat: int) -> dict
 
 def run(argv: list[str]) -> None:
     scene, level, flags, repeat = scene_args(argv, repeat=2)
-    calls = record([scene, "--resolution", level, *flags])
+    calls = record([scene, "--level", level, *flags])
     settings = {"every pattern made anew": 0, "detached segments": direct.DETACHED_MAX}
     runs = alternating(calls, settings, replay, repeat)
     print(f"route optimizations: {len(calls)} ({scene} level {level})")

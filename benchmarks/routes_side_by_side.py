@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/routes_side_by_side.py SCENE [LEVEL] [DESIGN FLAGS ...]
 
-Runs ``tendon-taichi design SCENE --resolution LEVEL --workers 0`` (default
+Runs ``tendon-taichi design SCENE --level LEVEL --workers 0`` (default
 level 1, and any further ``design`` flags given) in this process, into a
 temporary folder, and runs every route optimization the design makes twice
 more from the same start: by SLSQP with the clearance as a constraint (what
@@ -95,7 +95,7 @@ def report() -> None:
 def run(argv: list[str]) -> int:
     scene, level, flags, _ = scene_args(argv)
     with around("optimize_routes", _both), tempfile.TemporaryDirectory() as tmp:
-        rc = main(["design", scene, "--resolution", level, "--workers", "0", "--out", tmp, *flags])
+        rc = main(["design", scene, "--level", level, "--workers", "0", "--out", tmp, *flags])
     report()
     return rc
 

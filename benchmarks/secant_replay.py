@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/secant_replay.py SCENE [LEVEL] [OPTIMIZE FLAGS ...] [--repeat N]
 
-Runs ``tendon-taichi optimize SCENE --resolution LEVEL`` (default level 1, and
+Runs ``tendon-taichi optimize SCENE --level LEVEL`` (default level 1, and
 any further ``optimize`` flags given) in this process, into a temporary folder,
 and logs every call the optimizer makes to its soft IK (stage settings,
 restarts, evaluations). Then it replays that sequence N times (default 2) with
@@ -77,7 +77,7 @@ def replay(made: tuple, calls: list, secant: bool) -> tuple[float, int, int, np.
 
 def run(argv: list[str]) -> None:
     scene, level, flags, repeat = scene_args(argv, repeat=2)
-    made, calls = record([scene, "--resolution", level, *flags])
+    made, calls = record([scene, "--level", level, *flags])
     runs = {False: [], True: []}
     for _ in range(repeat):
         for secant in (False, True):

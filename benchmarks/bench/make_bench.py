@@ -15,7 +15,7 @@ optimization at those levels only), then writes DIR/table.txt and the page
 level, the machine and the commit that made it; the design pipeline's own
 folders go to a temporary folder, removed at the end); then the whole
 optimization at level ``--alone`` (5; none with a bare ``--alone``) in a process
-of its own (``tendon-taichi optimize t_shape --resolution N --quiet --json``):
+of its own (``tendon-taichi optimize t_shape --level N --quiet --json``):
 its wall time and peak resident memory, into bench.json and the page.
 ``--page-only`` writes table.txt and the page again from DIR/bench.json without
 measuring. Defaults: levels 1-6 (the whole design pipeline at 1-3: at 4 and 5 it
@@ -113,7 +113,7 @@ def optimize_alone(level: int) -> dict:
     wall time (s), its peak resident memory (MB; read from /proc while it runs:
     the rusage of a child counts the memory of the process that forked it), and
     its summary's evaluations and own time."""
-    cmd = [sys.executable, "-m", "tendon_taichi", "optimize", "t_shape", "--resolution", str(level),
+    cmd = [sys.executable, "-m", "tendon_taichi", "optimize", "t_shape", "--level", str(level),
            "--quiet", "--json"]
     with tempfile.TemporaryFile() as out:
         t = time.perf_counter()

@@ -203,8 +203,8 @@ def unreadable(b: Bench, run: Path):
 def resume_and_truncated(b: Bench, run: Path):
     d = b.folder("resume")
     rec = Path(shutil.copyfile(run, d / "run.rrd"))
-    r = b.cli("optimize", "--resume", rec, "--resolution", 2, cwd=d)
-    b.row("6. `--resume` with another `--resolution`", "`optimize --resume R --resolution 2`", r, files(d))
+    r = b.cli("optimize", "--resume", rec, "--level", 2, cwd=d)
+    b.row("6. `--resume` with another `--level`", "`optimize --resume R --level 2`", r, files(d))
     other = "finger" if read_recording(rec).meta["scene"] != "finger" else "t_shape"
     r = b.cli("optimize", other, "--resume", rec, cwd=d)
     b.row("6. `--resume` with another scene", f"`optimize {other} --resume R`", r, files(d))
@@ -252,8 +252,8 @@ def internal_errors(b: Bench, run: Path):
 
 def too_large(b: Bench):
     d = b.folder("large")
-    b.row("9. `simulate finger --resolution 99`", "`simulate finger --resolution 99 --uniform 0.05`",
-          b.cli("simulate", "finger", "--resolution", 99, "--uniform", 0.05, cwd=d), files(d))
+    b.row("9. `simulate finger --level 99`", "`simulate finger --level 99 --uniform 0.05`",
+          b.cli("simulate", "finger", "--level", 99, "--uniform", 0.05, cwd=d), files(d))
     scene(d, outline="[[0, 0], [1000, 0], [1000, 1000], [0, 1000]]", box="[[-1, -1], [1001, 1]]",
           point="[500, 1000]", goal="[500, 1001]")
     b.row("9. a 1 km outline with default sizes", "`simulate km.toml --uniform 0.05`",

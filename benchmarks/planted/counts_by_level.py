@@ -1,7 +1,7 @@
 """Tendon counts of the recommended design per case across resolution levels.
 
 Usage: python benchmarks/planted/counts_by_level.py L1.json L2.json L3.json
-(each the planted_bench.json of `tendon-taichi planted-bench --resolution N`).
+(each the planted_bench.json of `tendon-taichi planted-bench --level N`).
 Prints a markdown table (count / planted per level, pass per level) and how
 many cases keep the same count at every level, and within +-1.
 """

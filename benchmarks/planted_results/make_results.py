@@ -5,7 +5,7 @@ Usage: python benchmarks/planted_results/make_results.py [--levels 1 2 3] [--out
        [--independent-levels]
 
 For each level, from the coarsest up, runs `tendon-taichi planted-bench
-benchmarks/planted --resolution LEVEL --out RUNS/rLEVEL` (default settings, or
+benchmarks/planted --level LEVEL --out RUNS/rLEVEL` (default settings, or
 the [optimize] settings given by --set and the front's --beam and
 --no-converge; finished cases in RUNS are reused), each level after the first
 also searching from the level before's designs, as `planted-bench --levels`

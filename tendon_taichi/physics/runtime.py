@@ -152,7 +152,7 @@ def _plain_source_positions() -> None:
     """Taichi's compiler describes the source position of every syntax node it
     visits, word-wrapping the line and a caret under it for an error message that
     is almost never shown: about 0.6 s of every process's kernel compilation
-    (``py-spy record -- tendon-taichi design t_shape --resolution 2``), whether or not the kernels come from the
+    (``py-spy record -- tendon-taichi design t_shape --level 2``), whether or not the kernels come from the
     cache. Describe it by file, line and that line's text alone; the compiled
     kernels are the same."""
     from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext

@@ -140,7 +140,7 @@ _SAME_HALF = (np.arange(144) // 12 < 6) == (np.arange(144) % 12 < 6)
 #: a tendon robot's cables moved: the most segments whose entries its pattern lacks
 #: that it keeps (their blocks in the low-rank part, one more column to solve per
 #: factorization each) rather than make the new pattern and analyze it. On the route
-#: optimizations of `design t_shape --resolution 3` (benchmarks/route_replay.py):
+#: optimizations of `design t_shape --level 3` (benchmarks/route_replay.py):
 #: 13.95 ms per evaluation against 15.40 with every new pattern made when it was
 #: chosen (16 was no faster), 14.70 against 15.88 at fe418fd
 DETACHED_MAX = 8

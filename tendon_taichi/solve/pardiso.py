@@ -16,7 +16,7 @@ within its supernodes, ``indefinite``), which counts the negative eigenvalues
 (``iparm[9]``: below 1e-8 of the matrix) it would perturb that pivot and solve
 a slightly different matrix; it refuses instead, and the direct backend takes
 SuperLU, which pivots across the whole matrix. On the 33 route optimizations of
-``design t_shape --resolution 3`` (``python benchmarks/route_replay.py t_shape 3``,
+``design t_shape --level 3`` (``python benchmarks/route_replay.py t_shape 3``,
 at fe418fd) the 148 factorizations that were not positive definite took 7.52 ms
 each this way (the failed Cholesky and the analysis once per pattern included),
 9.84 ms with SuperLU.
@@ -61,7 +61,7 @@ threads: 7.3-8.1 ms, against 7.5 without), but it takes each solve off PARDISO's
 sequential substitution onto its parallel one, a BLAS call per supernode: one
 solve of t_shape's lattice at levels 2 / 3 / 5 takes 127 / 248 / 1354 us in
 the mode against 51 / 111 / 824 us without, on one thread
-(``python benchmarks/pardiso_modes.py``), and ``design t_shape --resolution 2``
+(``python benchmarks/pardiso_modes.py``), and ``design t_shape --level 2``
 spent much of its time in them. Below
 :data:`PARALLEL_MIN` a factorization runs on one thread whatever the process,
 the same bits without the mode, so it is on only from there
@@ -93,7 +93,7 @@ MKL_THREADING_INTEL, MKL_THREADING_SEQUENTIAL = 0, 1
 
 #: the least order of a matrix that is factorized on several threads. From there
 #: a whole optimization is faster (t_shape on 2 cores: level 4 43.5 s against
-#: 48.5, level 5 about 15 % less; ``tendon-taichi optimize t_shape --resolution 4``
+#: 48.5, level 5 about 15 % less; ``tendon-taichi optimize t_shape --level 4``
 #: against the same with ``TENDON_TAICHI_FACTOR_THREADS=1``); at level 3 (2716 DOFs)
 #: a factorization is faster too (0.96 against 1.55 ms) but the optimization is not
 #: (the second thread's waits cost the kernels around it), at level 2 not even the
@@ -182,7 +182,7 @@ def _threading_layer(mkl_rt: str) -> int:
     if not os.environ.get("KMP_BLOCKTIME"):
         # an idle thread spins 1 ms, then sleeps: OpenMP's 200 ms holds a core the work
         # between factorizations needs, 0 wakes it too often (35-36 s against 40.6 and
-        # 40.5: ``tendon-taichi optimize t_shape --resolution 5 --stage-iterations 60``
+        # 40.5: ``tendon-taichi optimize t_shape --level 5 --stage-iterations 60``
         # with KMP_BLOCKTIME 1, 200 and 0)
         os.environ["KMP_BLOCKTIME"] = "1"
     for name in (os.path.join(os.path.dirname(os.path.realpath(mkl_rt)), "libiomp5.so"), "libiomp5.so"):
