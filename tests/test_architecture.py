@@ -373,3 +373,13 @@ def test_no_call_passes_more_than_five_positional_arguments():
                     and (where, name) not in SPARED:
                 long.append(f"{where}:{call.lineno} {ast.unparse(call.func)}")
     assert not long, long
+
+
+def test_the_examples_are_there_and_a_test_runs_each():
+    """examples/ holds at least four scripts, each run by tests/test_examples.py (by
+    name, through its run_example), and that file also runs the README's Python block."""
+    scripts = sorted(p.name for p in (ROOT / "examples").glob("*.py"))
+    runner = (ROOT / "tests" / "test_examples.py").read_text()
+    assert len(scripts) >= 4, scripts
+    assert all(f'run_example("{s}"' in runner for s in scripts), scripts
+    assert "_readme_block()" in runner
