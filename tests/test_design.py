@@ -436,7 +436,9 @@ def test_a_design_hands_its_run_on_in_memory_and_its_thread_count_to_every_facto
 
     from conftest import use_cholesky
     from tendon_taichi.apps import design as design_app
+    from tendon_taichi.apps.settings import DesignSettings
     from tendon_taichi.body.scene import load_scene, with_overrides
+    from tendon_taichi.extract.settings import FrontSettings
     from tendon_taichi.io import recording
     from tendon_taichi.physics import runtime
     from tendon_taichi.solve import pardiso
@@ -464,8 +466,9 @@ def test_a_design_hands_its_run_on_in_memory_and_its_thread_count_to_every_facto
     monkeypatch.setattr(design_app, "Pool", _HereAsIfWorkers)
     (tmp_path / "finger.toml").write_text(SCENE)
     scene = with_overrides(load_scene(tmp_path / "finger.toml"), {"stage_iterations": 25, "k_min": 0.1})
-    done = design_app.design(scene, 1, tmp_path / "out", extractors=["strands", "path_cover"], png=False, beam=1,
-                             converge=False, workers=1)
+    settings = DesignSettings(extractors=("strands", "path_cover"), png=False,
+                              front=FrontSettings(beam=1, converge=False))
+    done = design_app.design(scene, 1, tmp_path / "out", settings, workers=1)
     assert reads == [] and factored and set(factored) == {(1, 1)}
     monkeypatch.undo()
     held, recorded = done.run.held, read_recording(tmp_path / "out" / "run.rrd")
