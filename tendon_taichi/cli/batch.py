@@ -87,9 +87,7 @@ def cmd_planted_bench(args) -> int:
 
     overrides = optimize_overrides(args)
     workers, scheduler = cluster_args(args)
-    levels = args.levels or args.level
-    if any(lv < 1 for lv in levels):
-        raise InputError(f"--level must be >= 1 (got {min(levels)})")
+    levels = args.levels or args.level  # checked by main (levels_given)
     settings = SuiteSettings(cases=args.cases, overrides=overrides, tendons=tendon_settings(args), solver=args.solver,
                              extractors=args.extractors, consolidation=consolidation(args),
                              front=FrontSettings(**front_settings(args)))

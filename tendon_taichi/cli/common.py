@@ -81,9 +81,9 @@ def add_level_flag(p, default: int | list[int] | None, help: str, many: bool = F
 
 
 def levels_given(args) -> list[int]:
-    """The levels a command was given (none where it takes no ``--level``); raises
-    InputError for one below 1."""
-    level = getattr(args, "level", None)
+    """The levels a command was given (``--level``, or planted-bench's ``--levels``;
+    none where it takes neither); raises InputError for one below 1."""
+    level = getattr(args, "levels", None) or getattr(args, "level", None)
     levels = [] if level is None else list(level) if isinstance(level, list) else [level]
     for lv in levels:
         if lv < 1:
