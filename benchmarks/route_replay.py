@@ -1,10 +1,11 @@
 """Route optimization with and without detached segments, on the same calls.
 
-Usage: python benchmarks/route_replay.py SCENE [LEVEL] [DESIGN FLAGS ...] [--repeat N]
+Usage: python benchmarks/route_replay.py SCENE [LEVEL] [DESIGN FLAGS ...] [--repeat N] [--calls K]
 
 Runs ``tendon-taichi design SCENE --level LEVEL --workers 0`` (default
 level 1, and any further ``design`` flags given) in this process, into a
-temporary folder, and keeps the arguments of every route optimization it makes.
+temporary folder, and keeps the arguments of every route optimization it makes
+(with ``--calls K``, of the first K only: a quick look, as the tests take).
 Then it runs them all again N times (default 2) with each setting of the direct
 backend, alternating: every moved route's pattern made anew where a waypoint
 crossed into another triangle (``detached_max`` 0), and the default, which keeps
@@ -164,9 +165,21 @@ def alternating(calls: list[tuple], settings: dict, replay, repeat: int) -> dict
     return runs
 
 
+def take_calls(argv: list[str]) -> tuple[list[str], int | None]:
+    """``argv`` without ``--calls K``, and K (None where it is not given)."""
+    argv = list(argv)
+    if "--calls" not in argv:
+        return argv, None
+    i = argv.index("--calls")
+    k = int(argv[i + 1])
+    del argv[i:i + 2]
+    return argv, k
+
+
 def run(argv: list[str]) -> None:
+    argv, k = take_calls(argv)
     scene, level, flags, repeat = scene_args(argv, repeat=2)
-    calls = record([scene, "--level", level, *flags])
+    calls = record([scene, "--level", level, *flags])[:k]
     settings = {"every pattern made anew": 0, "detached segments": direct.DETACHED_MAX}
     runs = alternating(calls, settings, replay, repeat)
     print(f"route optimizations: {len(calls)} ({scene} level {level})")
