@@ -136,6 +136,31 @@ def test_the_budget_buys_fewer_tendons_within_it(straight):
     assert short.layout.count == 2 and _actions(short) == []
 
 
+def test_a_body_too_narrow_for_the_clearance_keeps_every_tendon_flagged(straight):
+    """A clearance of 0.1 L (12.8 mm) in a T whose arms and stem are 20 mm wide: no
+    route can keep it, and none is left out. Each keeps about the
+    most the body allows (half the width, 10 mm), says so and is logged; only a
+    step of consolidation removes one, and every step says so; route optimization
+    keeps the clearance each had."""
+    p, paths, eq = straight
+    narrow = p.with_tendons(clearance=0.1)
+    st = _state(narrow, eq, paths)
+    tendons = _tendons(narrow, paths, st)
+    routes, tensions = cons.extracted_routes(narrow, tendons, st, 0.1 * p.size)
+    assert len(routes) == 2 and tensions.shape == (1, 2)
+    for r in routes:
+        assert r.kept_clearance == pytest.approx(narrow.walls.polyline_distance(r.waypoints), rel=1e-12)
+        assert 0.0095 <= r.kept_clearance <= 0.01 * (1 + 1e-9)
+    said = []
+    out = consolidate(Context(narrow, st, narrow.scene.optimize, "direct", log=said.append), tendons,
+                      ConsolidationSettings(0.0, 0.1, 0.0, 1, SCREEN))
+    actions = [s.action for s in out.steps]
+    assert "route" in actions and out.layout.count == 2 - actions.count("drop") - actions.count("join") >= 1
+    assert sum("too narrow" in line for line in said) == 2
+    for r in out.layout.routes:
+        assert r.kept_clearance is not None and narrow.walls.polyline_distance(r.waypoints) >= 0.0095
+
+
 def test_a_candidate_that_cannot_be_solved_is_skipped(straight, monkeypatch):
     """The split-tendon case again, with every layout of two tendons but the joined
     one unsolvable: the join is still found, the drops are skipped."""

@@ -73,6 +73,8 @@ def test_design_writes_every_output_and_nothing_else(designed):
         assert len(t["contraction"]) == 1 and t["tension"] > 0 and 0 < t["capstan"] <= 1
         assert t["capstan"] == pytest.approx(np.exp(-0.15 * t["turning"]))
         assert t["waypoints"][0] == t["anchor"] and t["waypoints"][-1] == t["pull_end"]
+        assert t["clearance_min"] >= 0.02 * summary["body_size"] * (1 - 1e-6)  # the finger is wide enough
+    assert not any("clearance asked" in w for w in summary["warnings"])
     m = rec["metrics"]
     for key in ("count", "total_length", "total_turning", "max_turn", "kinks", "capstan_worst", "tension_cv",
                 "coverage", "realizable_pose_error_rel", "realizable_pose_error_rel_frictionless", "clearance_min"):

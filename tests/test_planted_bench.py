@@ -33,6 +33,8 @@ def test_route_rule_and_totals():
              "planted_kinks": 0, "time_s": 5.0},
             {"passed": False, "error": "ConvergenceError: ...", "time_s": 1.0}]
     assert [route_rule(r) for r in rows[:3]] == [True, False, False]  # capstan 0.05 below; a kink too many
+    fewer = {**rows[2], "kinks": 0, "capstan_worst": 0.5}  # one tendon for two planted: the capstan is not asked
+    assert route_rule(fewer) and not route_rule({**fewer, "count": 2})
     t = totals(rows)
     assert (t["cases"], t["failed"], t["passed"], t["count_within_planted_plus_one"]) == (4, 1, 2, 2)
     assert (t["within_one_percent"], t["route_rule"], t["kinks"], t["planted_kinks"]) == (2, 1, 1, 0)

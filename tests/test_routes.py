@@ -12,7 +12,8 @@ from tendon_taichi import build_problem, load_scene, parse_scene
 from tendon_taichi.body.spline import basis, bezier_pieces
 from tendon_taichi.extract.context import Context
 from tendon_taichi.extract.protocol import turn_angles
-from tendon_taichi.extract.routes import Route, fit_route, join_routes, keep_clear, sample_count
+from tendon_taichi.extract.clearance import keep_clear
+from tendon_taichi.extract.routes import Route, fit_route, join_routes, sample_count
 from tendon_taichi.extract.routing import MAX_BEND, RouteObjective, RouteSettings, sharp_bends, turning
 
 RING = """

@@ -50,9 +50,10 @@ recommended design - at each resolution level. Everything in this folder is
 written by `python benchmarks/planted_results/make_results.py`; do not edit it
 by hand. A case passes when the recommended design has at most planted + 1
 tendons, its as-built robot reaches the goals within 1 % of L and the active
-length is at most twice the planted one; it meets the route rule when its
-worst capstan factor is at least the planted tendons' minus 0.05 (same mu) and
-it has no more kinks than they have. Per case: `planted_bench_level<N>.csv`;
+length is at most twice the planted one; it meets the route rule when it has
+no more kinks than the planted tendons and - where it has at least as many
+tendons as were planted - its worst capstan factor is at least theirs minus
+0.05 (same mu). Per case: `planted_bench_level<N>.csv`;
 the galleries `gallery_level<N>.png` (planted tendons dashed, the design's
 routes in colour, anchor a circle, pull end a square); the count at every
 level: `counts_by_level.md`; the three worst results over every level (misses

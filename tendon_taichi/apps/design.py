@@ -24,7 +24,9 @@ import numpy as np
 
 from ..body.problem import build_problem
 from ..body.scene import Scene
+from ..body.walls import Walls
 from ..errors import InputError, TendonError
+from ..extract.clearance import CLEAR_TOL
 from ..extract.consolidation import Layout
 from ..extract.context import Context
 from ..extract.converge import FineSolves, converge_front
@@ -106,8 +108,9 @@ def recommend(rows: list[dict], budget: float, max_tendons: int | None = None, m
     return min(pool, key=lambda e: (e["realizable_pose_error_rel"], e["count"]))
 
 
-def tendon_rows(layout: Layout, mu: float) -> list[dict]:
-    """The recommended tendons as ``design.json`` lists them."""
+def tendon_rows(layout: Layout, mu: float, walls: Walls) -> list[dict]:
+    """The recommended tendons as ``design.json`` lists them (``walls``: the body's,
+    for each route's clearance)."""
     real = layout.realizable
     P = 1 if real.poses is None else len(real.poses)
     contraction = np.asarray(real.contraction).reshape(P, -1)
@@ -119,7 +122,9 @@ def tendon_rows(layout: Layout, mu: float) -> list[dict]:
                      "anchor": t.anchor.tolist(), "pull_end": t.pull_end.tolist(), "length": t.length,
                      "contraction": contraction[:, i].tolist(), "tension": float(tension[:, i].max()),
                      "tension_per_pose": tension[:, i].tolist(), "turning": turning,
-                     "capstan": float(np.exp(-mu * turning)), "source": layout.routes[i].source or layout.source})
+                     "capstan": float(np.exp(-mu * turning)),
+                     "clearance_min": walls.polyline_distance(t.waypoints),
+                     "source": layout.routes[i].source or layout.source})
     return rows
 
 
@@ -214,7 +219,7 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, settings
                                           factor_threads=threads)
         summary["timing"]["optimize_s"] = run.summary["time_s"]
         summary["timing"]["workers"] = workers
-        summary["warnings"] = list(run.warnings) + _budget_warning(summary)
+        summary["warnings"] = list(run.warnings) + _budget_warning(summary) + clearance_warnings(summary)
         summary["files"] = _write(out, ex, layout, summary, png=settings.png, pool=pool)
     if pool.broken:
         progress.message(f"design: {pool.broken}")
@@ -325,6 +330,17 @@ def _pattern_said(ex: Extraction) -> str:
             f"(the regularizers' weights, --sparsity first, set how much stays)")
 
 
+def clearance_warnings(summary: dict) -> list[str]:
+    """A warning per recommended tendon whose route keeps less than the asked
+    clearance from the walls: the body is too narrow for it there, and it keeps
+    the most it can (``docs/method.md``, routes)."""
+    asked = summary["clearance"] * summary["body_size"]
+    return [f"tendon {i + 1} keeps {1e3 * row['clearance_min']:.2f} mm from the walls, less than the "
+            f"{1e3 * asked:.2f} mm clearance asked: the body is too narrow for it there"
+            for i, row in enumerate(summary["recommended"]["tendons"])
+            if row["clearance_min"] < asked * (1.0 - CLEAR_TOL)]
+
+
 def _budget_warning(summary: dict) -> list[str]:
     """A warning, as a list, when the recommended layout is not within the budget."""
     error = summary["recommended"]["metrics"]["realizable_pose_error_rel"]
@@ -404,7 +420,7 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], set
             "min_capstan": min_capstan,
             "recommended": {"count": layout.count, "source": layout.source,
                             "meets_min_capstan": chosen["capstan_worst"] >= min_capstan,
-                            "tendons": tendon_rows(layout, ms.mu), "metrics": metrics},
+                            "tendons": tendon_rows(layout, ms.mu, problem.walls), "metrics": metrics},
             "front": rows,
             "extractors": [{"name": r.name, "count": r.metrics.get("count"),
                             "realizable_pose_error_rel": r.metrics.get("realizable_pose_error_rel"),

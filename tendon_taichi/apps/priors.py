@@ -25,7 +25,8 @@ from ..body.scene import Scene
 from ..errors import InputError
 from ..extract.consolidation import Layout
 from ..extract.front import PriorLayout
-from ..extract.routes import Route, keep_clear
+from ..extract.clearance import clear_route
+from ..extract.routes import Route
 
 #: what a route from a prior design is marked with in ``source`` (its extractor's name follows)
 PRIOR = "prior:"
@@ -111,12 +112,8 @@ def _layout(rows: list, poses: int, where: str) -> PriorLayout:
 
 def prior_layouts(prior: PriorDesign, problem: Problem) -> list[PriorLayout]:
     """The prior design's layouts for ``problem``'s front, each route kept clear of
-    this body's walls at its clearance (a layout with a route that cannot be is
-    left out)."""
+    this body's walls at its clearance (or flagged with the most it keeps,
+    :func:`~tendon_taichi.extract.clearance.clear_route`)."""
     clearance = problem.scene.tendons.clearance * problem.size
-    out = []
-    for lay in prior.layouts:
-        routes = [keep_clear(r, problem.walls, clearance) for r in lay.routes]
-        if all(r is not None for r in routes):
-            out.append(replace(lay, routes=routes))
-    return out
+    return [replace(lay, routes=[clear_route(r, problem.walls, clearance) for r in lay.routes])
+            for lay in prior.layouts]

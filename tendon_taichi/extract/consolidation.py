@@ -57,7 +57,8 @@ from ..tasks.pool import Pool
 from .context import Context
 from .protocol import IdealizedState, Tendon, turn_angles
 from .realizable import RealizableResult, pose_tension, predict_realizable, solve_realizable_poses, warm_ratios
-from .routes import Route, fit_route, join_routes, keep_clear, sample_count
+from .clearance import clear_route, held_clearance
+from .routes import Route, fit_route, join_routes, sample_count
 from .routing import PRICE_PER_BUDGET, RouteSettings, optimize_routes, shape_cost
 from .settings import ConsolidationSettings
 
@@ -332,14 +333,16 @@ class _Search:
 
     def joins(self, a: Route, b: Route, reach: float, clearance: float) -> list[Route]:
         """Every smooth join of ``a`` and ``b`` end to end (either end of each) whose
-        ends are within ``reach`` and that keeps the clearance."""
+        ends are within ``reach`` and that keeps the clearance (as much of it as the
+        one of them that keeps less, where one is flagged)."""
         out = []
+        least = min(held_clearance(a, clearance), held_clearance(b, clearance)) * (1.0 - 1e-3)
         for a2 in (a, a.reversed()):  # a2 ends at the joint
             for b2 in (b, b.reversed()):  # b2 starts there
                 if np.linalg.norm(a2.control[-1] - b2.control[0]) > reach:
                     continue
-                joined = keep_clear(join_routes(a2, b2, self.problem.size), self.problem.walls, clearance)
-                if joined is not None:
+                joined = clear_route(join_routes(a2, b2, self.problem.size), self.problem.walls, clearance)
+                if held_clearance(joined, clearance) >= least:
                     out.append(joined)
         return out
 
@@ -374,14 +377,14 @@ class _Search:
         ``rounds`` (default ``refine``) rounds of at most ``iterations`` (default the
         route settings') SLSQP iterations, while a round lowers the cost; each round
         starts from the routes resampled for their length and made to keep the
-        clearance."""
+        clearance (a flagged route, as much as it kept)."""
         rounds = self.options.refine if rounds is None else min(rounds, self.options.refine)
         rs = self.rs if iterations is None else replace(self.rs, iterations=iterations)
         for k in range(rounds if now.routes else 0):
             size = self.problem.size
-            routes = [Route(r.control, sample_count(r.length, size), r.tension, r.tension_std, r.source)
-                      for r in now.routes]
-            routes = [keep_clear(r, self.problem.walls, self.rs.clearance) or r for r in routes]
+            routes = [Route(r.control, sample_count(r.length, size), r.tension, r.tension_std, r.source,
+                            kept_clearance=r.kept_clearance) for r in now.routes]
+            routes = [clear_route(r, self.problem.walls, self.rs.clearance) for r in routes]
             real = now.realizable
             self.log(f"{self.source}: optimizing {len(routes)} route(s), round {k + 1}")
             t0 = time.perf_counter()
@@ -389,9 +392,10 @@ class _Search:
                                   rs, positions(real))
             self.out.route_evaluations += res.evaluations
             self.out.route_s += time.perf_counter() - t0
-            cleared = [keep_clear(r, self.problem.walls, self.rs.clearance) for r in res.routes]
-            if any(r is None for r in cleared):
-                break
+            cleared = [clear_route(r, self.problem.walls, self.rs.clearance) for r in res.routes]
+            c = self.rs.clearance
+            if any(held_clearance(a, c) < held_clearance(b, c) * (1.0 - 1e-3) for a, b in zip(cleared, routes)):
+                break  # a route moved where it keeps less clearance than it did
             lay = self.solve(cleared, res.ratios, now)
             if lay is None or lay.cost >= now.cost * (1.0 - 1e-3):
                 break
@@ -419,16 +423,13 @@ def positions(real: RealizableResult) -> list[np.ndarray]:
 def extracted_routes(problem: Problem, tendons: list[Tendon], state: IdealizedState, clearance: float,
                      source: str = "") -> tuple[list[Route], np.ndarray]:
     """Each extracted tendon as a smooth route that keeps ``clearance`` (m) from the
-    walls - a tendon that cannot (it runs where the body is narrower) is left out -
-    and the routes' tensions in each pose (P, T), N, from their tendons' fibers."""
-    routes, tensions = [], []
+    walls - or, where the body is too narrow for it, the largest clearance it can,
+    flagged (:func:`~.clearance.clear_route`); none is left out - and the routes'
+    tensions in each pose (P, T), N, from their tendons' fibers."""
     states = state.poses or [state]
-    for t in tendons:
-        r = keep_clear(fit_route(t.waypoints, problem.size, t.tension, t.tension_std, source), problem.walls,
-                       clearance)
-        if r is not None:
-            routes.append(r)
-            tensions.append([pose_tension(st, t) for st in states])
+    routes = [clear_route(fit_route(t.waypoints, problem.size, t.tension, t.tension_std, source), problem.walls,
+                          clearance) for t in tendons]
+    tensions = [[pose_tension(st, t) for st in states] for t in tendons]
     return routes, np.array(tensions).reshape(len(routes), len(states)).T
 
 
@@ -441,6 +442,10 @@ def consolidate(context: Context, tendons: list[Tendon], options: ConsolidationS
     rs = route_settings(context.problem, options)
     search = _Search(context, options, rs, source)
     routes, tensions = extracted_routes(context.problem, tendons, context.state, rs.clearance, source)
+    for i, r in enumerate(routes):
+        if r.kept_clearance is not None:
+            search.log(f"{source}: route {i + 1} keeps {1e3 * r.kept_clearance:.2f} mm of the "
+                       f"{1e3 * rs.clearance:.2f} mm clearance (the body is too narrow for it there)")
     first = search.solve(routes, search.start_ratios(routes, tensions))
     if first is None:
         raise ConvergenceError(f"the as-built robot of {source or 'the'} tendons cannot be solved")

@@ -95,7 +95,8 @@ import numpy as np
 from ..probes import probe
 from .consolidation import Candidate, Consolidation, Layout, _Search, positions, route_settings
 from .context import Context
-from .routes import Route, extend_route, keep_clear, resample
+from .clearance import clear_route, held_clearance
+from .routes import Route, extend_route, resample
 from .settings import ConsolidationSettings, FrontSettings
 
 #: the front joins routes whose ends are up to this far apart (x L; consolidation's --join-gap when
@@ -505,14 +506,15 @@ def _repair(search: _Search, front: Front, pool: list[Route], size: float, chang
 def _extension_jobs(search: _Search, layout: Layout, size: float) -> list[tuple]:
     """The jobs of :func:`_screened` for the solved ``layout``: its routes with one
     route end carried on straight by ``EXTEND`` x L (:func:`~.routes.extend_route`;
-    each end of each route, kept clear of the walls; an end the walls cut back to
-    less than half that is left out)."""
+    each end of each route, kept clear of the walls as the route was; an end the
+    walls cut back to less than half that is left out)."""
     jobs = []
+    c = search.rs.clearance
     for i, route in enumerate(layout.routes):
         for end in (0, 1):
-            longer = keep_clear(extend_route(route, end, EXTEND * size, size), search.problem.walls,
-                                search.rs.clearance)
-            if longer is None or longer.length < route.length + 0.5 * EXTEND * size:
+            longer = clear_route(extend_route(route, end, EXTEND * size, size), search.problem.walls, c)
+            if (held_clearance(longer, c) < held_clearance(route, c) * (1.0 - 1e-3)
+                    or longer.length < route.length + 0.5 * EXTEND * size):
                 continue
             jobs.append((layout, layout.routes[:i] + [longer] + layout.routes[i + 1:]))
     return jobs

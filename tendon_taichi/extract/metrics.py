@@ -63,8 +63,9 @@ def tendon_metrics(problem, state: IdealizedState, tendons: list[Tendon],
     coefficient of variation of the tension along a source strand, over the
     tendons; ``tension_cvs`` per tendon), ``coverage`` (the share of the
     idealized active tension-length sum tau_i a0_i that the tendons carry,
-    :func:`covered_fibers`) and ``clearance_min``, the least distance of a
-    tendon from the outline and holes, m (negative if one leaves the body)."""
+    :func:`covered_fibers`), ``clearances``, each tendon's least distance from
+    the outline and holes, m (negative where one leaves the body), and
+    ``clearance_min``, the least of them (None with no tendon)."""
     s = settings or MetricSettings()
     a0 = problem.fibers.a0
     turns = [t.turn_angles() for t in tendons]
@@ -76,7 +77,7 @@ def tendon_metrics(problem, state: IdealizedState, tendons: list[Tendon],
     total = float((state.tau[active] * a0[active]).sum())
     used = active[covered_fibers(problem, tendons, active)]
     covered = float((state.tau[used] * a0[used]).sum())
-    walls = problem.walls
+    clearances = [problem.walls.polyline_distance(t.waypoints) for t in tendons]
     return {
         "count": len(tendons),
         "total_length": float(sum(t.length for t in tendons)),
@@ -89,5 +90,6 @@ def tendon_metrics(problem, state: IdealizedState, tendons: list[Tendon],
         "tension_cv": float(cvs.max()) if len(cvs) else 0.0,
         "tension_cvs": cvs.tolist(),
         "coverage": covered / total if total > 0 else 0.0,
-        "clearance_min": min((walls.polyline_distance(t.waypoints) for t in tendons), default=None),
+        "clearances": clearances,
+        "clearance_min": min(clearances, default=None),
     }

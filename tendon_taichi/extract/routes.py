@@ -10,9 +10,9 @@ size L only, never on the mesh: a route means the same at every resolution.
 
 :func:`fit_route` turns an extracted chain of lattice fibers into a route (a
 least-squares fit with the ends held, smoothed so that a 45-degree zig-zag
-becomes the line it approximates); :func:`keep_clear` moves a route's control
-points until every waypoint keeps the clearance from the walls;
-:func:`join_routes` and :func:`extend_route` make new routes from old.
+becomes the line it approximates); :func:`join_routes` and
+:func:`extend_route` make new routes from old. Keeping clear of the walls is
+:mod:`.clearance`'s.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..body.walls import Walls
 from ..body.spline import basis
 from .protocol import Tendon
 
@@ -54,7 +53,10 @@ def control_count(length: float, size: float) -> int:
 class Route:
     """A smooth route: ``control`` (m, 2) rest coordinates, m (anchor first, pull end
     last), sampled at ``samples`` waypoints; ``tension`` and ``tension_std`` (N) of the
-    strand it came from, and ``source``, the extractor (or 'join') that made it."""
+    strand it came from, and ``source``, the extractor (or 'join') that made it;
+    ``kept_clearance`` (m): None where the route keeps the asked clearance from the
+    walls, else the smaller one it keeps (the body is too narrow for the asked one
+    there, :func:`~.clearance.clear_route`)."""
 
     control: np.ndarray
     samples: int
@@ -62,6 +64,7 @@ class Route:
     tension_std: float = 0.0
     source: str = ""
     contraction: float | None = None
+    kept_clearance: float | None = None
 
     @property
     def basis(self) -> np.ndarray:
@@ -138,81 +141,6 @@ def fit_route(points: np.ndarray, size: float, tension: float = 0.0, tension_std
     length = polyline_length(points)
     return Route(fit_control(points, control_count(length, size)), sample_count(length, size),
                  tension, tension_std, source)
-
-
-def _trim_ends(points: np.ndarray, walls: Walls, clearance: float) -> np.ndarray:
-    """A polyline (k, 2) with each end that runs head-on into a wall closer than
-    ``clearance`` cut back (along the polyline, densely resampled) to where it
-    keeps that clearance; an end that runs along a wall is kept (it is pushed off
-    later). Head-on: going back along the route from the end, the distance from
-    the walls grows at least as fast as along a 45-degree line."""
-    dense, _ = resample(points, max(200, 4 * len(points)))
-    d = walls.distance(dense)
-    step = float(np.linalg.norm(dense[1] - dense[0]))
-    lo, hi = 0, len(dense) - 1
-    for order in (1, -1):
-        dd = d[::order]
-        if dd[0] >= clearance or step <= 0:
-            continue
-        k = min(8, len(dd) - 1)
-        if (dd[k] - dd[0]) / (k * step) < np.sin(np.pi / 4):  # along the wall
-            continue
-        clear = np.flatnonzero(dd >= clearance)
-        if len(clear):
-            if order > 0:
-                lo = int(clear[0])
-            else:
-                hi = len(dense) - 1 - int(clear[0])
-    return dense[lo:hi + 1] if hi - lo >= 2 else points
-
-
-#: the refit that pushes a route off the walls: a little smoothing, the pushed waypoints held harder
-PUSH_SMOOTHING = 0.005
-PUSH_WEIGHT = 10.0
-
-
-def along_segments(B: np.ndarray, parts: int = 4) -> np.ndarray:
-    """Rows of B ((k, m): waypoints from control points) for ``parts`` evenly spread
-    points along every segment between consecutive waypoints, the last waypoint
-    included: ((k - 1) parts + 1, m), the polyline's points linear in the control points."""
-    t = np.arange(parts) / parts
-    rows = (1.0 - t)[None, :, None] * B[:-1, None, :] + t[None, :, None] * B[1:, None, :]
-    return np.vstack([rows.reshape(-1, B.shape[1]), B[-1:]])
-
-
-def keep_clear(route: Route, walls: Walls, clearance: float, iterations: int = 40) -> Route | None:
-    """The route made to keep ``clearance`` (m) from the walls along its whole
-    polyline (waypoints and the segments between them): an end that runs head-on
-    into a wall is cut back along the route (the tendon ends inside the body),
-    then the control points are moved (least change, by repeated fits) until
-    every point of it keeps the clearance; None when that cannot be done (the
-    route runs where the body is too narrow)."""
-    pts = route.waypoints
-    if walls.polyline_distance(pts) >= clearance * (1.0 - 1e-6):
-        return route
-    d = walls.distance(pts[[0, -1]])
-    if d.min() < clearance:
-        route = route.with_control(fit_control(_trim_ends(pts, walls, clearance * (1.0 + 1e-3)),
-                                               len(route.control)))
-    parts = 4
-    B = along_segments(route.basis, parts)
-    control = route.control.copy()
-    for _ in range(iterations):
-        pts = B @ control
-        d, g = walls.distance_gradient(pts)
-        short = d < clearance * (1.0 + 1e-3)
-        if not short.any():
-            done = route.with_control(control)
-            if walls.polyline_distance(done.waypoints) >= clearance * (1.0 - 1e-6):
-                return done
-            parts = min(2 * parts, 256)  # a wall's corner came closer between the points looked at: more
-            B = along_segments(route.basis, parts)
-            continue
-        # push the short points in by what they lack (and a little more), and refit,
-        # holding the pushed ones harder than the others
-        target = pts + np.where(short[:, None], g * (clearance * 1.1 - d)[:, None], 0.0)
-        control = smooth_fit(B, target, PUSH_SMOOTHING, weights=np.where(short, PUSH_WEIGHT, 1.0))
-    return None
 
 
 def extend_route(route: Route, end: int, distance: float, size: float) -> Route:

@@ -48,6 +48,7 @@ from ..optimizer.soft_ik import SoftIK
 from ..physics.capstan import perp
 from ..physics.waypoints import rest_point_gradient
 from ..probes import probe
+from .clearance import held_clearance
 from .context import Context
 from .realizable import tendon_cables
 from .routes import Route, polyline_length
@@ -75,7 +76,7 @@ STROKE = 0.9
 #: objective 0.97x and 0.93x) with 53-64 % of its evaluations (benchmarks/routes_side_by_side.py);
 #: 30 ended about where it did (median 1.00x) with 40-47 %
 ITERATIONS = 40
-#: a point keeps the clearance within this fraction of it (what :func:`~.routes.keep_clear` accepts)
+#: a point keeps the clearance within this fraction of it (what :func:`~.clearance.clear_route` accepts)
 CLEAR_TOL = 1e-6
 
 
@@ -197,7 +198,9 @@ class RouteObjective:
     # ------------------------------------------------------------ the clearance constraint
     def clearance(self, z: np.ndarray, jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """``(d_i - c) / L`` (q,) for every waypoint of every route at z (>= 0: it keeps
-        the clearance), and with ``jacobian`` its Jacobian w.r.t. z (q, len(z))."""
+        the clearance ``c``, the route's own where it is flagged,
+        :func:`~.clearance.held_clearance`), and with ``jacobian`` its Jacobian
+        w.r.t. z (q, len(z))."""
         routes, _ = self.unpack(z)
         values, rows, at = [], [], 0
         for r in routes:
@@ -209,7 +212,7 @@ class RouteObjective:
                 rows.append(J)
             else:
                 d = self.walls.distance(r.waypoints)
-            values.append((d - self.rs.clearance) / self.L)
+            values.append((d - held_clearance(r, self.rs.clearance)) / self.L)
             at += r.control.size
         return np.concatenate(values), (np.vstack(rows) if jacobian else None)
 

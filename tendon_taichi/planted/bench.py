@@ -216,10 +216,13 @@ def score_design(summary: dict, planted_count: int, length_ratio: float) -> dict
 
 
 def route_rule(case: dict) -> bool:
-    """The design's worst capstan is at least the planted tendons' minus CAPSTAN_SLACK
-    and it has no more kinks than they have."""
-    return bool(case["capstan_worst"] >= case["planted_capstan_worst"] - CAPSTAN_SLACK
-                and case["kinks"] <= case["planted_kinks"])
+    """The design has no more kinks than the planted tendons and, where it uses at
+    least as many tendons as were planted, its worst capstan is at least theirs
+    minus CAPSTAN_SLACK. A design with fewer tendons is better even at a lower
+    capstan: its as-built error already pays for the friction (``docs/method.md``, the planted suite)."""
+    capstan = (case["count"] < case["planted_count"]
+               or case["capstan_worst"] >= case["planted_capstan_worst"] - CAPSTAN_SLACK)
+    return bool(capstan and case["kinks"] <= case["planted_kinks"])
 
 
 def totals(cases: list[dict]) -> dict:
@@ -346,7 +349,8 @@ def table(result: dict) -> list[str]:
     t = result["totals"]
     out.append(f"passed {t['passed']} of {t['cases']} ({t['failed']} failed); tendon count <= planted + 1 in "
                f"{t['count_within_planted_plus_one']}; as built within 1 % of L in {t['within_one_percent']}; "
-               f"route rule (capstan >= planted - {CAPSTAN_SLACK:g}, kinks <= planted) in {t['route_rule']}; "
+               f"route rule (kinks <= planted; with as many tendons as planted or more, capstan >= planted - "
+               f"{CAPSTAN_SLACK:g}) in {t['route_rule']}; "
                f"median capstan {t['median_capstan_worst']} (planted {t['median_planted_capstan_worst']}); "
                f"median length ratio {t['median_length_ratio']}, total time {t['time_s']:.0f} s")
     return out
