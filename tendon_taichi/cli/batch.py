@@ -4,11 +4,12 @@ and ``sweep``, and the Dask flags they share."""
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 from ..errors import InputError
-from ..files import file_stem
+from ..files import check_folder, file_stem
 from .common import SOLVER_CHOICES, add_json, add_level_flag, json_out
 from .runs import add_optimize_flags, optimize_overrides
 from .tendons import (add_consolidation_flags, add_front_flags, add_tendon_flags, consolidation, front_settings,
@@ -88,6 +89,7 @@ def cmd_planted_bench(args) -> int:
     overrides = optimize_overrides(args)
     workers, scheduler = cluster_args(args)
     levels = args.levels or args.level  # checked by main (levels_given)
+    suite = _suite(args)
     settings = SuiteSettings(cases=args.cases, overrides=overrides, tendons=tendon_settings(args), solver=args.solver,
                              extractors=args.extractors, consolidation=consolidation(args),
                              front=FrontSettings(**front_settings(args)))
@@ -96,19 +98,42 @@ def cmd_planted_bench(args) -> int:
         from ..planted.levels import run_levels
         from ..planted.levels import table as levels_table
 
-        result = run_levels(args.suite, sorted(set(levels)), args.out,
+        result = run_levels(suite, sorted(set(levels)), args.out,
                             coarse_to_fine=not args.independent_levels, **kwargs)
         json_out(args, result)
         if args.json != "-":
             print("\n".join(levels_table(result)))
             print(f"outputs in {args.out}/ (levels.json, fronts.png, level<N>/)")
         return 0
-    result = run_suite(args.suite, levels[0], args.out, **kwargs)
+    result = run_suite(suite, levels[0], args.out, **kwargs)
     json_out(args, result)
     if args.json != "-":
         print("\n".join(table(result)))
         print(f"outputs in {args.out}/ (planted_bench.json, planted_bench.csv, gallery.png)")
     return 0
+
+
+def _suite(args) -> Path:
+    """The suite planted-bench runs: the folder given (default benchmarks/planted),
+    or with ``--generated N`` that many generated cases from ``--seed``, written
+    into OUT/generated/ first."""
+    if args.generated is None:
+        return Path(args.suite or "benchmarks/planted")
+    if args.suite is not None:
+        raise InputError("give a suite folder or --generated N, not both")
+    if not 1 <= args.generated <= MAX_GENERATED:
+        raise InputError(f"--generated must be 1..{MAX_GENERATED} (got {args.generated})")
+    if args.seed < 0:
+        raise InputError(f"--seed must be >= 0 (got {args.seed})")
+    from ..planted.shapes import generate_suite
+
+    folder = Path(args.out) / "generated"
+    check_folder(folder, "output")
+    return generate_suite(args.generated, args.seed, folder, say=lambda text: print(text, file=sys.stderr, flush=True))
+
+
+#: the most cases ``planted-bench --generated`` draws
+MAX_GENERATED = 1000
 
 
 # ------------------------------------------------------------------ sweep
@@ -180,8 +205,13 @@ def add_commands(sub) -> None:
 
     s = sub.add_parser("planted-bench", help="the design pipeline on a suite of planted layouts, scored "
                                              "against what was planted")
-    s.add_argument("suite", metavar="DIR", nargs="?", default="benchmarks/planted",
+    s.add_argument("suite", metavar="DIR", nargs="?", default=None,
                    help="folder of planted cases, NAME.toml + NAME.json (default benchmarks/planted)")
+    s.add_argument("--generated", type=int, default=None, metavar="N",
+                   help="instead of a folder, N generated cases (random bodies nobody tuned for, planted; "
+                        "written into OUT/generated/ first)")
+    s.add_argument("--seed", type=int, default=0, metavar="S",
+                   help="with --generated, the first case's seed (default 0): cases S .. S + N - 1")
     level = s.add_mutually_exclusive_group()
     add_level_flag(level, [2], "resolution level (default 2); several levels run at each (into DIR/level<N>/) "
                                "and compare: per case the front of every level and whether the recommended "
