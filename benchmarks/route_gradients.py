@@ -1,10 +1,11 @@
 """Route optimization with the gradient at every point it values, and only where SLSQP asks.
 
-Usage: python benchmarks/route_gradients.py SCENE [LEVEL] [DESIGN FLAGS ...] [--repeat N]
+Usage: python benchmarks/route_gradients.py SCENE [LEVEL] [DESIGN FLAGS ...] [--repeat N] [--calls K]
 
 Runs ``tendon-taichi design SCENE --level LEVEL --workers 0`` (default
 level 1, and any further ``design`` flags given) in this process and keeps the
-arguments of every route optimization it makes (``route_replay.record``).
+arguments of every route optimization it makes (``route_replay.record``; with
+``--calls K``, of the first K only).
 Then it runs them all again N times (default 2) each way, alternating: with
 each point's adjoint solved as the point is valued (what ``optimize_routes``
 did before: the trial points SLSQP's line search rejects had their gradient
@@ -27,7 +28,7 @@ from tendon_taichi.extract import routing
 from tendon_taichi.probes import around
 
 from _scene_args import scene_args
-from route_replay import alternating, record
+from route_replay import alternating, record, take_calls
 
 WAYS = {"gradient at every point": True, "gradient where SLSQP asks": False}
 
@@ -61,8 +62,9 @@ def replay(calls: list[tuple], every_point: bool) -> tuple[float, int, int, list
 
 
 def run(argv: list[str]) -> None:
+    argv, k = take_calls(argv)
     scene, level, flags, repeat = scene_args(argv, repeat=2)
-    calls = record([scene, "--level", level, *flags])
+    calls = record([scene, "--level", level, *flags])[:k]
     runs = alternating(calls, WAYS, replay, repeat)
     print(f"route optimizations: {len(calls)} ({scene} level {level})")
     for label, done in runs.items():

@@ -75,9 +75,10 @@ def test_routes_side_by_side_runs_each_route_optimization_both_ways():
     assert out[2].startswith("L-BFGS-B, penalty:") and out[3].startswith("SLSQP, constraint:") and old > 0 < new
 
 
-def test_route_gradients_runs_every_route_optimization_both_ways():
-    out = run(BENCH / "route_gradients.py", "t_shape", 1, *SHORT_DESIGN, "--repeat", 1).stdout.splitlines()[-4:]
-    assert out[0].startswith("route optimizations:") and int(out[0].split()[2]) > 0
+def test_route_gradients_runs_route_optimizations_both_ways():
+    out = run(BENCH / "route_gradients.py", "t_shape", 1, *SHORT_DESIGN, "--repeat", 1, "--calls", 3
+              ).stdout.splitlines()[-4:]
+    assert out[0].startswith("route optimizations:") and 0 < int(out[0].split()[2]) <= 3
     assert out[1].startswith("gradient at every point:") and out[2].startswith("gradient where SLSQP asks:")
     (every_points, every_adjoints), (points, adjoints) = (
         [int(part.split()[0]) for part in ln.split(", ")[1:]] for ln in out[1:3])

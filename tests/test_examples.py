@@ -67,16 +67,6 @@ def test_the_example_plugin_finds_the_finger_s_straight_tendon(tmp_path, monkeyp
     assert list(tmp_path.iterdir()) == []  # its run went into a temporary folder
 
 
-@pytest.mark.slow
-def test_small_sweep_designs_both_cases(tmp_path, monkeypatch, capsys):
-    out = run_example("small_sweep.py", ["--out", "sw"], monkeypatch, capsys, tmp_path)
-    rows = re.findall(r"sparsity ([\d.e-]+): pose error ([\d.]+)% of L, (\d+) active fibers, "
-                      r"recommended (\d+) tendon\(s\)", out)
-    assert sorted(float(r[0]) for r in rows) == [1e-4, 3e-4], out
-    assert all(float(r[1]) < 1.0 and int(r[3]) == 1 for r in rows), out
-    assert (tmp_path / "sw" / "sweep.json").is_file()
-
-
 def _readme_block() -> str:
     text = (ROOT / "README.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
@@ -85,9 +75,10 @@ def _readme_block() -> str:
 
 
 @pytest.mark.slow
-def test_the_readme_python_block_runs(tmp_path, monkeypatch, capsys):
+def test_the_readme_python_block_and_the_small_sweep_example_run(tmp_path, monkeypatch, capsys):
     """Run as written, in a folder that has the repository's examples/; then the
-    values it printed are checked."""
+    values it printed are checked. Then examples/small_sweep.py there (it runs the
+    same sweep into the same folder)."""
     (tmp_path / "examples").symlink_to(EXAMPLES)
     monkeypatch.chdir(tmp_path)
     space: dict = {"__name__": "__main__"}
@@ -97,3 +88,13 @@ def test_the_readme_python_block_runs(tmp_path, monkeypatch, capsys):
     assert "True" in out.splitlines()[2]                        # the replay reproduces every stage
     assert space["eq"].residual < 1e-8 and space["eq"].tau.max() > 0
     assert len(space["result"]["cases"]) == 2 and not space["result"]["failed"]
+    # the small-sweep example, run where the block ran its sweep (the same file, the same
+    # default folder): it designs both cases - reusing the block's, as a sweep reruns
+    out = run_example("small_sweep.py", [], monkeypatch, capsys, tmp_path)
+    rows = re.findall(r"sparsity ([\d.e-]+): pose error ([\d.]+)% of L, (\d+) active fibers, "
+                      r"recommended (\d+) tendon\(s\)", out)
+    assert sorted(float(r[0]) for r in rows) == [1e-4, 3e-4], out
+    assert all(float(r[1]) < 1.0 and int(r[3]) == 1 for r in rows), out
+    again = json.loads((tmp_path / "recordings" / "sweeps" / "small" / "sweep.json").read_text())
+    assert all(c["reused"] for c in again["cases"])
+    assert [c["design"]["count"] for c in again["cases"]] == [c["design"]["count"] for c in space["result"]["cases"]]
