@@ -385,3 +385,18 @@ def test_versus_commit_times_both_pipelines(tmp_path):
     for folder in ("design-r1", "design-r1-2"):
         assert (tmp_path / folder / "design.json").exists()
     assert "old / new" in out.stdout and "median of 2 runs" in out.stdout
+
+
+def test_make_results_takes_generated_cases(tmp_path, monkeypatch):
+    """With --generated N it runs N generated cases, written into RUNS/generated/
+    first (the same files planted-bench --generated writes)."""
+    import argparse
+
+    monkeypatch.syspath_prepend(str(BENCH / "planted_results"))
+    import make_results
+
+    folder = make_results.suite_folder(argparse.Namespace(generated=1, seed=1, runs=tmp_path))
+    assert folder == tmp_path / "generated"
+    assert sorted(p.name for p in folder.iterdir()) == ["gen001_hook_planted_1t_s1.json",
+                                                        "gen001_hook_planted_1t_s1.toml"]
+    assert make_results.suite_folder(argparse.Namespace(generated=None, seed=0, runs=tmp_path)) == make_results.SUITE

@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/planted_results/make_results.py [--levels 1 2 3] [--out DIR] [--runs DIR]
        [--workers N] [--cases NAME ...] [--set KEY=VALUE ...] [--beam B] [--no-converge]
-       [--independent-levels]
+       [--independent-levels] [--generated N [--seed S]]
 
 For each level, from the coarsest up, runs `tendon-taichi planted-bench
 benchmarks/planted --level LEVEL --out RUNS/rLEVEL` (default settings, or
@@ -17,6 +17,10 @@ worst_cases.png (the three worst results over every level run), fronts.png
 level the suite's figures, per case its figures at every level, the levels
 compared as `planted-bench --levels` compares them, and the commit that made
 them. The default run (levels 1-3, 16 cases) takes about an hour on 2 cores.
+With ``--generated N`` the suite is N generated cases from seed S (default 0;
+``planted-bench --generated``: bodies nobody tuned for), written into
+RUNS/generated/ first; benchmarks/generated_results/ holds
+``--generated 60 --levels 2 --out benchmarks/generated_results``.
 """
 
 import argparse
@@ -32,6 +36,7 @@ from tendon_taichi.planted.bench import SuiteSettings, load_suite, route_rule, r
 from tendon_taichi.planted.gallery import gallery_figure
 from tendon_taichi.planted.levels import compare_levels, fronts_figure, prior_designs
 from tendon_taichi.planted.levels import table as levels_table
+from tendon_taichi.planted.shapes import generate_suite
 from tendon_taichi.tasks.engine import Cluster
 from tendon_taichi.version import provenance
 
@@ -40,10 +45,9 @@ SUITE = HERE.parent / "planted"
 sys.path.insert(0, str(SUITE))
 import counts_by_level  # noqa: E402  (a script beside the suite)
 
-INTRO = """# Planted-suite results
+INTRO = """# {title}
 
-`tendon-taichi planted-bench` (see `docs/cli.md`) on the suite in
-`benchmarks/planted` with the default settings - the `design` pipeline:
+`tendon-taichi planted-bench` (see `docs/cli.md`) on {suite} with the default settings - the `design` pipeline:
 optimize, every extractor, consolidation and route optimization on the
 as-built robot (capstan friction mu = 0.1, clearance 2 % of L), the
 recommended design - at each resolution level. Everything in this folder is
@@ -109,22 +113,28 @@ def worst(runs: list[dict], n: int = 3) -> list[tuple[int, dict]]:
     return sorted(done, key=lambda lc: (lc[1]["passed"], route_rule(lc[1]), -lc[1]["realizable_pose_error_rel"]))[:n]
 
 
-def worst_figure(runs: list[dict], path: Path) -> None:
+def worst_figure(runs: list[dict], path: Path, suite: Path) -> None:
     """The gallery's panels (planted dashed, the design's routes in colour) of the
-    worst results, each titled with its level."""
+    worst results of ``suite``, each titled with its level."""
     chosen = worst(runs)
-    fig = gallery_figure({"cases": [c for _, c in chosen]}, {c.name: c for c in load_suite(SUITE)})
+    fig = gallery_figure({"cases": [c for _, c in chosen]}, {c.name: c for c in load_suite(suite)})
     for ax, (level, _) in zip(fig.axes, chosen):
         ax.set_title(f"level {level}: {ax.get_title()}", fontsize=7)
     fig.suptitle("the worst results over every level: planted (dashed) vs designed (colour)", fontsize=10)
     fig.savefig(path, dpi=110)
 
 
-def page(runs: list[dict], levels: dict) -> str:
+def page(runs: list[dict], levels: dict, generated: tuple[int, int] | None = None) -> str:
+    """The results page; ``generated``: (N, S) where the suite was N generated cases from seed S."""
     p = runs[0].get("provenance") or provenance()
     settings = runs[0]["settings"] or "the defaults"
+    intro = INTRO.format(title="Planted-suite results", suite="the suite in\n`benchmarks/planted`")
+    if generated is not None:
+        intro = INTRO.format(title="Results on generated scenes", suite=(
+            f"{generated[0]} generated cases\n(`--generated {generated[0]} --seed {generated[1]}`: random bodies nobody "
+            "tuned for, `docs/method.md`, generated scenes)"))
     return "\n".join([
-        INTRO,
+        intro,
         f"Made at commit `{p['commit']}`{' (with uncommitted changes)' if p['dirty'] else ''} on {p['date']}, "
         f"settings: {settings}, consolidation: {runs[0]['consolidation']}.", "",
         *summary(runs), "", "## Per case", "",
@@ -152,6 +162,15 @@ def _setting(item: str):
         raise SystemExit(f"--set {item}: the value must be a TOML value")
 
 
+def suite_folder(args) -> Path:
+    """The suite to run: benchmarks/planted, or with ``--generated N`` that many
+    generated cases from ``--seed``, written into RUNS/generated/."""
+    if args.generated is None:
+        return SUITE
+    return generate_suite(args.generated, args.seed, args.runs / "generated",
+                          say=lambda text: print(text, file=sys.stderr, flush=True))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3])
@@ -163,7 +182,10 @@ def main(argv=None) -> int:
     add_front_flags(ap)
     ap.add_argument("--independent-levels", action="store_true",
                     help="search each level on its own (default: from the level before's designs too)")
+    ap.add_argument("--generated", type=int, default=None, metavar="N", help="N generated cases instead of the suite")
+    ap.add_argument("--seed", type=int, default=0, metavar="S", help="with --generated, the first case's seed")
     args = ap.parse_args(argv)
+    suite = suite_folder(args)
     front = front_settings(args)
     overrides = dict(_setting(s) for s in args.set)
     runs = []
@@ -171,17 +193,18 @@ def main(argv=None) -> int:
     for level, before in zip(levels, [None] + levels[:-1]):
         run_dir = args.runs / f"r{level}"
         coarser = not args.independent_levels and before is not None
-        priors = prior_designs(SUITE, args.runs / f"r{before}", before) if coarser else None
+        priors = prior_designs(suite, args.runs / f"r{before}", before) if coarser else None
         settings = SuiteSettings(cases=args.cases, overrides=overrides, front=FrontSettings(**front), priors=priors)
-        runs.append(run_suite(SUITE, level, run_dir, settings, Cluster(workers=args.workers)))
+        runs.append(run_suite(suite, level, run_dir, settings, Cluster(workers=args.workers)))
         args.out.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(run_dir / "planted_bench.csv", args.out / f"planted_bench_level{level}.csv")
         shutil.copyfile(run_dir / "gallery.png", args.out / f"gallery_level{level}.png")
     (args.out / "counts_by_level.md").write_text("\n".join(counts_by_level.table(runs)) + "\n")
-    worst_figure(runs, args.out / "worst_cases.png")
+    worst_figure(runs, args.out / "worst_cases.png", suite)
     compared = {**compare_levels({r["level"]: r for r in runs}), "coarse_to_fine": not args.independent_levels}
     fronts_figure(compared).savefig(args.out / "fronts.png", dpi=90)
-    (args.out / "README.md").write_text(page(runs, compared))
+    generated = None if args.generated is None else (args.generated, args.seed)
+    (args.out / "README.md").write_text(page(runs, compared, generated))
     print(f"wrote {args.out}/", file=sys.stderr)
     return 0
 
