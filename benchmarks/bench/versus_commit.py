@@ -84,10 +84,11 @@ def main(argv=None) -> int:
             for k in range(args.repeat):
                 tag = f"r{level}" if k == 0 else f"r{level}-{k + 1}"
                 run = work / f"old-{tag}.rrd"
+                # the old commit's flag (--level came later; --resolution stays its alias)
                 t_opt = timed([old, "optimize", args.scene, "--resolution", str(level), "--record", str(run),
                                "--quiet"] + short)
                 t_cmp = timed([old, "compare", str(run), "--no-record"] + bare)
-                t_new = timed(new + ["design", args.scene, "--resolution", str(level), "--out",
+                t_new = timed(new + ["design", args.scene, "--level", str(level), "--out",
                                      str(work / f"design-{tag}"), "--quiet", "--no-png"] + quick)
                 runs.append({"old_optimize_s": t_opt, "old_compare_s": t_cmp, "old_s": t_opt + t_cmp,
                              "design_s": t_new, "speedup": (t_opt + t_cmp) / t_new})
