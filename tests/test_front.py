@@ -179,7 +179,7 @@ def test_a_layout_with_a_slack_route_is_offered_at_its_working_count(searched, m
     at the count below: here the two-tendon layouts finish as one planted route
     and a slack one (the pose is out of reach), the three-tendon ones as both
     planted routes and a slack one; the front's two-tendon entry is then both
-    planted routes, and the recommendation 2, not 3."""
+    planted routes, the recommendation 2, not 3, and the front's JSON says so."""
     from dataclasses import replace
 
     import tendon_taichi.extract.front as front_module
@@ -200,6 +200,8 @@ def test_a_layout_with_a_slack_route_is_offered_at_its_working_count(searched, m
     assert front.layouts[3].count == 3 and front_module.slack_routes(front.layouts[3]) == [2]
     assert front.layouts[2].error < 1e-3 and front_module.slack_routes(front.layouts[2]) == []
     assert recommend(front_rows(front, None, 0.0, 30.0), 0.005)["count"] == 2
+    # the routes left out are said: the three-tendon layout's slack one made the two-tendon entry
+    assert {"count": 3, "kept": 2, "error": front.layouts[2].error} in front.as_json()["slack"]
 
 
 def _planted_tendons(p, st):

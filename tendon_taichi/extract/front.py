@@ -140,7 +140,10 @@ class Front:
     candidates screened, ``route_evaluations`` equilibria of route optimization in
     ``route_s`` seconds, ``time_s`` in all; ``priors`` of the seeds came from
     a prior design (:class:`PriorLayout`); ``refit``: the counts whose routes the
-    finer mesh optimized again (:func:`~.converge.converge_front`); ``on_finished``,
+    finer mesh optimized again (:func:`~.converge.converge_front`); ``slack``: each
+    time a layout's slack routes were left out and the rest replaced the front's
+    layout of their count (``count`` before, ``kept`` after, ``error`` as built);
+    ``on_finished``,
     while :func:`search_front` runs, is called with each distinct layout as it
     joins ``finished``."""
 
@@ -156,6 +159,7 @@ class Front:
     time_s: float = 0.0
     priors: int = 0
     refit: list[int] = field(default_factory=list)
+    slack: list[dict] = field(default_factory=list)
     on_finished: Callable[[Layout], None] | None = field(default=None, repr=False, compare=False)
 
     def offer(self, layouts: list[Layout], size: float) -> None:
@@ -171,7 +175,7 @@ class Front:
         return {"counts": sorted(self.layouts), "seeds": self.seeds, "priors": self.priors, "pool": self.pool,
                 "evaluations": self.evaluations, "screened": self.screened,
                 "route_evaluations": self.route_evaluations, "route_s": self.route_s, "time_s": self.time_s,
-                "refit": list(self.refit)}
+                "refit": list(self.refit), "slack": list(self.slack)}
 
 
 def same_route(a: Route, b: Route, size: float, tol: float = SAME_ROUTE) -> bool:
@@ -305,6 +309,7 @@ def search_front(context: Context, consolidations: list[Consolidation], options:
                 say(f"front: {lay.count - smaller.count} of the {lay.count} routes are slack; the rest make a "
                     f"{smaller.count}-tendon layout of {100 * smaller.error:.2f}% of L")
                 front.layouts[smaller.count] = smaller
+                front.slack.append({"count": lay.count, "kept": smaller.count, "error": smaller.error})
         within = any(m.error <= options.budget for m in front.layouts.values())
     _extend(search, front, pool, size, options)
     _descend(search, front, pool, size, say)
