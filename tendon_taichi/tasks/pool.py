@@ -11,7 +11,10 @@ process takes the next one itself whenever it is free, so ``workers = cores -
 1`` keeps every core busy.
 The results come back in the items' order and are those of
 ``[fn(item) for item in items]`` whenever ``fn`` depends only on its
-argument: which process ran an item does not change what it gives. ``fn``
+argument: which process ran an item does not change what it gives (each
+worker's BLAS thread pools are sized as this process's were when the pool
+started: a product summed by another number of threads can differ in its last
+bits). ``fn``
 and the items are pickled in the calling thread as the map starts, not by
 the executor's own thread while this process computes with the same objects.
 
@@ -68,16 +71,40 @@ def _ready() -> bool:
 CLEAN_UP_S = 10.0
 
 
-def _start(setup: Callable[..., Any] | None, args: tuple) -> None:
+def blas_threads() -> int | None:
+    """The size of this process's BLAS thread pools (the smallest; None where none
+    is loaded)."""
+    from threadpoolctl import threadpool_info
+
+    sizes = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    return min(sizes) if sizes else None
+
+
+def _limit_blas(threads: int | None) -> None:
+    """This worker's BLAS thread pools (numpy's and scipy's, loaded now) at the job
+    process's size: a product summed by another number of threads can differ in its
+    last bits, which an iterative solve can grow (a route's clearance fit did, by
+    5e-13 m, before the worker's own Taichi set-up capped them)."""
+    if threads is None:
+        return
+    import numpy  # noqa: F401 - their BLAS loaded now, so that the cap reaches it
+    import scipy.linalg  # noqa: F401
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=threads, user_api="blas")
+
+
+def _start(setup: Callable[..., Any] | None, args: tuple, blas: int | None = None) -> None:
     """A worker's start: Ctrl-C is for the process that runs the job (it stops the
-    workers), the worker ends with that process (:func:`_end_with_parent`), then
-    ``setup``, during which SIGTERM (:meth:`Pool.close`, :func:`_end_with_parent`)
+    workers), the worker ends with that process (:func:`_end_with_parent`), its
+    BLAS thread pools are sized as the job process's (``blas``), then ``setup``, during which SIGTERM (:meth:`Pool.close`, :func:`_end_with_parent`)
     raises ``SystemExit`` so that ``setup`` cleans up; a set-up that fails or is
     stopped ends the worker quietly (the pool breaks, and the job goes on in its
     own process)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _end_with_parent()
     try:
+        _limit_blas(blas)
         signal.signal(signal.SIGTERM, _leave_setup)
         try:
             if setup is not None:
@@ -162,7 +189,7 @@ class Pool:
         self._pickled: tuple[Any, bytes] | None = None  # the last deferred function, pickled
         if workers:
             self._executor = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=_start, initargs=(setup, setup_args))
+                                                 initializer=_start, initargs=(setup, setup_args, blas_threads()))
             # one call per worker starts them all now (a spawning pool starts a process per call waiting)
             self._starting = [self._executor.submit(_ready) for _ in range(workers)]
 
