@@ -24,7 +24,6 @@ import numpy as np
 
 from ..body.problem import build_problem
 from ..body.scene import Scene
-from ..body.walls import Walls
 from ..errors import InputError, TendonError
 from ..extract.clearance import CLEAR_TOL
 from ..extract.consolidation import Layout
@@ -108,9 +107,9 @@ def recommend(rows: list[dict], budget: float, max_tendons: int | None = None, m
     return min(pool, key=lambda e: (e["realizable_pose_error_rel"], e["count"]))
 
 
-def tendon_rows(layout: Layout, mu: float, walls: Walls) -> list[dict]:
-    """The recommended tendons as ``design.json`` lists them (``walls``: the body's,
-    for each route's clearance)."""
+def tendon_rows(layout: Layout, mu: float, clearances: list[float]) -> list[dict]:
+    """The recommended tendons as ``design.json`` lists them (``clearances``: each
+    one's least distance from the walls, m, as the metrics give them)."""
     real = layout.realizable
     P = 1 if real.poses is None else len(real.poses)
     contraction = np.asarray(real.contraction).reshape(P, -1)
@@ -123,7 +122,7 @@ def tendon_rows(layout: Layout, mu: float, walls: Walls) -> list[dict]:
                      "contraction": contraction[:, i].tolist(), "tension": float(tension[:, i].max()),
                      "tension_per_pose": tension[:, i].tolist(), "turning": turning,
                      "capstan": float(np.exp(-mu * turning)),
-                     "clearance_min": walls.polyline_distance(t.waypoints),
+                     "clearance_min": clearances[i],
                      "source": layout.routes[i].source or layout.source})
     return rows
 
@@ -420,7 +419,7 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], set
             "min_capstan": min_capstan,
             "recommended": {"count": layout.count, "source": layout.source,
                             "meets_min_capstan": chosen["capstan_worst"] >= min_capstan,
-                            "tendons": tendon_rows(layout, ms.mu, problem.walls), "metrics": metrics},
+                            "tendons": tendon_rows(layout, ms.mu, metrics["clearances"]), "metrics": metrics},
             "front": rows,
             "extractors": [{"name": r.name, "count": r.metrics.get("count"),
                             "realizable_pose_error_rel": r.metrics.get("realizable_pose_error_rel"),

@@ -41,18 +41,20 @@ CHANGE_WEIGHT = 1e-3
 CLEAR_ITERATIONS, FTOL = 100, 1e-9
 #: how far a fit may move a control point, in units of the clearance plus what the route lacks of it
 REACH = 2.0
-#: points held per segment between waypoints at first, and on the finest look for more (a
-#: wall's corner can come closer between the points held: its closest point is held then, and
-#: the fit solved again, at most LOOKS times)
-PARTS, MAX_PARTS = 1, 256
+#: points per segment between waypoints on the finest look for points that come too close (a
+#: wall's corner can come closer between the waypoints held: its closest point is held then,
+#: and the fit solved again, at most LOOKS times)
+MAX_PARTS = 256
 LOOKS = 6
 #: a route keeps a clearance within this fraction of it ...
 CLEAR_TOL = 1e-6
 #: ... and the fit asks for this fraction more (SLSQP ends its constraints' values about this close)
 MARGIN = 2e-3
+#: a route moved, joined or carried on may keep this fraction less clearance than it came with
+KEPT_TOL = 1e-3
 
 
-def along_segments(B: np.ndarray, parts: int = PARTS) -> np.ndarray:
+def along_segments(B: np.ndarray, parts: int) -> np.ndarray:
     """Rows of B ((k, m): waypoints from control points) for ``parts`` evenly spread
     points along every segment between consecutive waypoints, the last waypoint
     included: ((k - 1) parts + 1, m), the polyline's points linear in the control points."""
@@ -65,6 +67,12 @@ def held_clearance(route: Route, clearance: float) -> float:
     """The clearance (m) ``route`` is held to: the asked ``clearance``, or less
     where it is flagged (it keeps less, :func:`clear_route`)."""
     return clearance if route.kept_clearance is None else min(clearance, route.kept_clearance)
+
+
+def keeps_as_much(route: Route, held: float, clearance: float) -> bool:
+    """Whether ``route`` is held to at least ``held`` (m) of the asked ``clearance``
+    (within KEPT_TOL): what a route made from others must keep."""
+    return held_clearance(route, clearance) >= held * (1.0 - KEPT_TOL)
 
 
 def keep_clear(route: Route, walls: Walls, clearance: float) -> Route | None:
@@ -92,7 +100,7 @@ def clear_route(route: Route, walls: Walls, clearance: float) -> Route:
         return replace(route.with_control(control), kept_clearance=None)
     control, kept = fit.widest(route.control)
     if kept > 0:  # the least change that keeps (nearly) that much
-        closer = fit.solve(control, kept * (1.0 - 1e-3))
+        closer = fit.solve(control, kept * (1.0 - KEPT_TOL))
         if closer is not None:
             control, kept = closer, walls.polyline_distance(route.basis @ closer)
     return replace(route.with_control(control), kept_clearance=None if kept >= target else float(kept))
@@ -112,7 +120,7 @@ class _Fit:
         self.m = len(route.control)
         D = np.diff(np.eye(self.m), 2, axis=0)
         self.DtD = D.T @ D / max(len(D), 1)
-        self.A_fit = along_segments(route.basis, PARTS)
+        self.A_fit = route.basis
         self.p = self.A_fit @ route.control / h
         self.A_keep = self.A_fit
         lack = max(0.0, h - float(walls.distance(self.p * h).min()))
@@ -144,7 +152,7 @@ class _Fit:
         control = self.control(u)
         if self.walls.polyline_distance(self.route.basis @ control) >= clearance * (1.0 - CLEAR_TOL):
             return True
-        parts = 2 * PARTS
+        parts = 2
         while parts <= MAX_PARTS:
             A = along_segments(self.route.basis, parts)
             d = self.walls.distance(A @ control)

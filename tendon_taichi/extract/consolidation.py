@@ -57,7 +57,7 @@ from ..tasks.pool import Pool
 from .context import Context
 from .protocol import IdealizedState, Tendon, turn_angles
 from .realizable import RealizableResult, pose_tension, predict_realizable, solve_realizable_poses, warm_ratios
-from .clearance import clear_route, held_clearance
+from .clearance import clear_route, held_clearance, keeps_as_much
 from .routes import Route, fit_route, join_routes, sample_count
 from .routing import PRICE_PER_BUDGET, RouteSettings, optimize_routes, shape_cost
 from .settings import ConsolidationSettings
@@ -336,13 +336,13 @@ class _Search:
         ends are within ``reach`` and that keeps the clearance (as much of it as the
         one of them that keeps less, where one is flagged)."""
         out = []
-        least = min(held_clearance(a, clearance), held_clearance(b, clearance)) * (1.0 - 1e-3)
+        least = min(held_clearance(a, clearance), held_clearance(b, clearance))
         for a2 in (a, a.reversed()):  # a2 ends at the joint
             for b2 in (b, b.reversed()):  # b2 starts there
                 if np.linalg.norm(a2.control[-1] - b2.control[0]) > reach:
                     continue
                 joined = clear_route(join_routes(a2, b2, self.problem.size), self.problem.walls, clearance)
-                if held_clearance(joined, clearance) >= least:
+                if keeps_as_much(joined, least, clearance):
                     out.append(joined)
         return out
 
@@ -394,7 +394,7 @@ class _Search:
             self.out.route_s += time.perf_counter() - t0
             cleared = [clear_route(r, self.problem.walls, self.rs.clearance) for r in res.routes]
             c = self.rs.clearance
-            if any(held_clearance(a, c) < held_clearance(b, c) * (1.0 - 1e-3) for a, b in zip(cleared, routes)):
+            if not all(keeps_as_much(a, held_clearance(b, c), c) for a, b in zip(cleared, routes)):
                 break  # a route moved where it keeps less clearance than it did
             lay = self.solve(cleared, res.ratios, now)
             if lay is None or lay.cost >= now.cost * (1.0 - 1e-3):

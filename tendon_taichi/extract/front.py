@@ -94,8 +94,8 @@ import numpy as np
 
 from ..probes import probe
 from .consolidation import Candidate, Consolidation, Layout, _Search, positions, route_settings
+from .clearance import clear_route, held_clearance, keeps_as_much
 from .context import Context
-from .clearance import clear_route, held_clearance
 from .routes import Route, extend_route, resample
 from .settings import ConsolidationSettings, FrontSettings
 
@@ -518,7 +518,7 @@ def _extension_jobs(search: _Search, layout: Layout, size: float) -> list[tuple]
     for i, route in enumerate(layout.routes):
         for end in (0, 1):
             longer = clear_route(extend_route(route, end, EXTEND * size, size), search.problem.walls, c)
-            if (held_clearance(longer, c) < held_clearance(route, c) * (1.0 - 1e-3)
+            if (not keeps_as_much(longer, held_clearance(route, c), c)
                     or longer.length < route.length + 0.5 * EXTEND * size):
                 continue
             jobs.append((layout, layout.routes[:i] + [longer] + layout.routes[i + 1:]))

@@ -48,7 +48,7 @@ from ..optimizer.soft_ik import SoftIK
 from ..physics.capstan import perp
 from ..physics.waypoints import rest_point_gradient
 from ..probes import probe
-from .clearance import held_clearance
+from .clearance import CLEAR_TOL, held_clearance
 from .context import Context
 from .realizable import tendon_cables
 from .routes import Route, polyline_length
@@ -76,8 +76,6 @@ STROKE = 0.9
 #: objective 0.97x and 0.93x) with 53-64 % of its evaluations (benchmarks/routes_side_by_side.py);
 #: 30 ended about where it did (median 1.00x) with 40-47 %
 ITERATIONS = 40
-#: a point keeps the clearance within this fraction of it (what :func:`~.clearance.clear_route` accepts)
-CLEAR_TOL = 1e-6
 
 
 def turns(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
