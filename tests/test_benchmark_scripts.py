@@ -38,8 +38,17 @@ def test_every_script_has_a_test():
               "realizable_side_by_side.py", "planted/held_out.py", "routes_side_by_side.py",
               "secant_replay.py", "route_replay.py", "extension_screen.py", "_scene_args.py",
               "warm_newton.py", "warm_parts.py", "auto_solver.py", "assembly.py", "multigrid.py", "pardiso_modes.py",
-              "route_gradients.py", "kernel_launch.py"}
+              "route_gradients.py", "kernel_launch.py", "search_cost.py"}
     assert scripts == tested
+
+
+def test_search_cost_counts_the_candidates_of_over_segmented_layouts(tmp_path):
+    run(BENCH / "search_cost.py", "--counts", 3, 12, 24, "--json", tmp_path / "cost.json")
+    rows = json.loads((tmp_path / "cost.json").read_text())
+    assert [r["pieces"] for r in rows] == [3, 12, 24] and all(r["merged"] == 3 for r in rows)
+    for r in rows:
+        assert r["reductions_bounded"] <= r["reductions_every_pair"] and r["reductions_bounded"] <= 13 * r["pieces"]
+    assert rows[-1]["pool_k1_bounded"] < rows[-1]["pool_k1_every_pair"]
 
 
 def test_scene_args_splits_scene_level_flags_and_repeat():

@@ -13,6 +13,7 @@ from tendon_taichi import (CableSet, InputError, Model, NewtonSolver, build_prob
                            load_scene, parse_scene)
 from tendon_taichi.body.geometry import points_in_polygon
 from tendon_taichi.planted.plant import layout_json, plant
+from tendon_taichi.planted.walk import PlantSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 SUITE = ROOT / "benchmarks" / "planted"
@@ -91,20 +92,28 @@ def test_planted_equilibrium_reproduces_the_goals(planted):
         assert layout["pose"]["max_target_displacement"] == pytest.approx(disp, rel=1e-6)
 
 
-def test_tendons_are_smooth_and_inside_with_margin(planted):
+def test_tendons_are_smooth_and_inside_with_margin_and_leave_at_the_clamp(planted):
     for (name, n, seed), (text, layout) in planted.items():
-        scene = load_scene(name)
+        # the cross is clamped in its middle: no clamp meets its outline, its tendons end inside
+        exit = layout.get("exit", "inside")
+        assert exit == parse_scene(text).tendons.exit == ("inside" if name == "cross" else "clamp")
+        scene = load_scene(name).with_tendons(exit=exit)
         p = build_problem(scene, 2)
         L, spacing = p.size, p.fibers.spacing
+        lead = 0.0 if p.exits is None else 1.5 * max(p.exits.zone, 1.1 * spacing)  # walk.Region.lead
         paths = []
         for t in layout["tendons"]:
             w = np.array(t["waypoints"])
+            if p.exits is not None:  # the pull end is where it leaves: on the outline (to 3 um), in the clamp
+                assert p.exits.nearest(w[-1:])[1][0] <= 3e-6 and scene.clamp_distance(w[-1:])[0] <= 3e-6, name
+                assert p.walls.inside(w[-1:])[0]
             dense = _dense(w, 0.2 * spacing)
-            assert points_in_polygon(dense, scene.body.outline).all(), name
+            held = np.linalg.norm(dense - w[-1], axis=1) >= lead
+            assert points_in_polygon(dense[held], scene.body.outline).all(), name
             for hole in scene.body.holes:
                 assert not points_in_polygon(dense, hole).any(), name
             loops = (scene.body.outline, *scene.body.holes)
-            clearance = min(_distance_to_polygon(dense, q).min() for q in loops)
+            clearance = min(_distance_to_polygon(dense[held], q).min() for q in loops)
             assert clearance >= spacing * (1 - 1e-9), (name, clearance / spacing)
             assert 0.25 * L - 1e-9 <= t["length"] <= 0.9 * L + 1e-9
             assert t["length"] == pytest.approx(np.linalg.norm(np.diff(w, axis=0), axis=1).sum(), rel=1e-12)
@@ -208,7 +217,7 @@ def test_checked_in_suite_loads():
 def test_checked_in_case_regenerates():
     c = {"scene": "snake", "tendons": 2, "seed": 2}
     name = f"{c['scene']}_planted_{c['tendons']}t_s{c['seed']}"
-    text, layout = plant(c["scene"], c["tendons"], c["seed"])
+    text, layout = plant(c["scene"], c["tendons"], c["seed"], settings=PlantSettings(exit="inside"))  # as the suite
     stored = json.loads((SUITE / f"{name}.json").read_text())
     for a, b in zip(layout["tendons"], stored["tendons"]):
         assert np.allclose(a["waypoints"], b["waypoints"], atol=1e-9, rtol=0)

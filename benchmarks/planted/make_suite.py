@@ -16,6 +16,7 @@ from pathlib import Path
 from tendon_taichi import load_scene, parse_scene
 from tendon_taichi.planted.gallery import plot_layouts
 from tendon_taichi.planted.plant import plant, write_planted
+from tendon_taichi.planted.walk import PlantSettings
 from tendon_taichi.version import provenance
 
 HERE = Path(__file__).resolve().parent
@@ -68,6 +69,7 @@ def main():
     args = ap.parse_args()
     suite = tomllib.loads((HERE / "suite.toml").read_text())
     level = suite["level"]
+    exit = suite.get("exit", "clamp")
     rows, commands, cases = [], [], []
     for case in suite["cases"]:
         scene = load_scene(case["scene"])
@@ -75,7 +77,8 @@ def main():
         name = f"{case['scene']}_planted_{case['tendons']}t_s{case['seed']}" + (f"_{poses}p" if poses > 1 else "")
         if args.only and name not in args.only:
             continue
-        text, layout = plant(scene, case["tendons"], case["seed"], level, poses=poses)
+        text, layout = plant(scene, case["tendons"], case["seed"], level, poses=poses,
+                             settings=PlantSettings(exit=exit))
         toml_path, _ = write_planted(args.out, text, layout)
         cases.append((parse_scene(text, origin=str(toml_path)), layout))
         rows.append(f"| {layout['name']} | {case['scene']} | {case['tendons']} | {poses} | {case['seed']} | "
@@ -83,7 +86,7 @@ def main():
                     f"{100 * layout['pose']['max_target_displacement_rel']:.1f} |")
         commands.append(f"tendon-taichi planted {case['scene']} --tendons {case['tendons']} "
                         f"--seed {case['seed']} --level {level}" + (f" --poses {poses}" if poses > 1 else "")
-                        + " --out benchmarks/planted")
+                        + (f" --exit {exit}" if exit != "clamp" else "") + " --out benchmarks/planted")
         print(rows[-1], flush=True)
     if args.only:
         return

@@ -107,9 +107,11 @@ def recommend(rows: list[dict], budget: float, max_tendons: int | None = None, m
     return min(pool, key=lambda e: (e["realizable_pose_error_rel"], e["count"]))
 
 
-def tendon_rows(layout: Layout, mu: float, clearances: list[float]) -> list[dict]:
+def tendon_rows(layout: Layout, mu: float, clearances: list[float], scene: Scene) -> list[dict]:
     """The recommended tendons as ``design.json`` lists them (``clearances``: each
-    one's least distance from the walls, m, as the metrics give them)."""
+    one's least distance from the walls, m, as the metrics give them): with each
+    one's ``exit`` (where it leaves the body, m, or None) and ``clamp_distance``,
+    the distance of its pull end from the nearest clamped box, m."""
     real = layout.realizable
     P = 1 if real.poses is None else len(real.poses)
     contraction = np.asarray(real.contraction).reshape(P, -1)
@@ -123,6 +125,8 @@ def tendon_rows(layout: Layout, mu: float, clearances: list[float]) -> list[dict
                      "tension_per_pose": tension[:, i].tolist(), "turning": turning,
                      "capstan": float(np.exp(-mu * turning)),
                      "clearance_min": clearances[i],
+                     "exit": None if t.exit is None else t.exit.tolist(),
+                     "clamp_distance": float(scene.clamp_distance(t.pull_end[None])[0]),
                      "source": layout.routes[i].source or layout.source})
     return rows
 
@@ -415,11 +419,13 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], set
     ts = problem.scene.tendons
     done = [r.consolidation for r in ex.results if r.consolidation is not None]
     return {"scene": problem.scene.name, "resolution": problem.level, "body_size": problem.size,
-            "friction": ts.friction, "clearance": ts.clearance, "budget": budget, "max_tendons": max_tendons,
+            "friction": ts.friction, "clearance": ts.clearance, "exit": ts.exit, "budget": budget,
+            "max_tendons": max_tendons,
             "min_capstan": min_capstan,
             "recommended": {"count": layout.count, "source": layout.source,
                             "meets_min_capstan": chosen["capstan_worst"] >= min_capstan,
-                            "tendons": tendon_rows(layout, ms.mu, metrics["clearances"]), "metrics": metrics},
+                            "tendons": tendon_rows(layout, ms.mu, metrics["clearances"], problem.scene),
+                            "metrics": metrics},
             "front": rows,
             "extractors": [{"name": r.name, "count": r.metrics.get("count"),
                             "realizable_pose_error_rel": r.metrics.get("realizable_pose_error_rel"),

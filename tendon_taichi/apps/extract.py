@@ -296,7 +296,7 @@ def extract(path: str | Path | RecordedRun, settings: ExtractSettings = ExtractS
     if unknown_opts:
         raise InputError(f"options given for extractor(s) not run: {', '.join(sorted(unknown_opts))}")
     solver = LinearSettings(run.meta.get("solver", "auto") if s.solver == "recorded" else s.solver, s.factor_threads)
-    problem = run.problem().with_tendons(friction=s.friction, clearance=s.clearance)
+    problem = run.problem().with_tendons(friction=s.friction, clearance=s.clearance, exit=s.exit)
     state = idealized_state(run, problem, stage, solver)
     ms = s.metric_settings or MetricSettings(mu=problem.scene.tendons.friction)
     if workers is not None and workers.active and len(names) > 1:

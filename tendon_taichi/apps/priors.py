@@ -26,6 +26,7 @@ from ..errors import InputError
 from ..extract.consolidation import Layout
 from ..extract.front import PriorLayout
 from ..extract.clearance import clear_route
+from ..extract.exits import exit_route
 from ..extract.routes import Route
 
 #: what a route from a prior design is marked with in ``source`` (its extractor's name follows)
@@ -37,11 +38,16 @@ SAME_SIZE = 1e-6
 def route_rows(layout: Layout) -> list[dict]:
     """A solved layout's routes as ``design.json`` lists them with a front entry:
     ``control_points`` (c, 2) m, ``samples`` (waypoints), ``tension`` (N, the strand's
-    it started from), ``contraction_ratio`` (one per pose) and ``source``."""
+    it started from), ``contraction_ratio`` (one per pose) and ``source``; a route
+    that leaves the body, the ``exit_segment`` (2, 2) m its pull end lies on."""
     ratios = np.atleast_2d(layout.realizable.ratios).reshape(-1, layout.count)  # (P, T)
-    return [{"control_points": r.control.tolist(), "samples": r.samples, "tension": r.tension,
-             "contraction_ratio": ratios[:, i].tolist(), "source": r.source}
-            for i, r in enumerate(layout.routes)]
+    rows = []
+    for i, r in enumerate(layout.routes):
+        rows.append({"control_points": r.control.tolist(), "samples": r.samples, "tension": r.tension,
+                     "contraction_ratio": ratios[:, i].tolist(), "source": r.source})
+        if r.exits:
+            rows[-1]["exit_segment"] = r.exit.tolist()
+    return rows
 
 
 @dataclass(frozen=True)
@@ -105,7 +111,13 @@ def _layout(rows: list, poses: int, where: str) -> PriorLayout:
         if len(ratio) != poses:
             raise InputError(f"{where} is a design for {len(ratio)} pose(s); this scene has {poses}")
         source = str(r.get("source") or "front")
-        routes.append(Route(control, samples, tension, source=source if source.startswith(PRIOR) else PRIOR + source))
+        exit = r.get("exit_segment")
+        try:
+            exit = None if exit is None else np.asarray(exit, dtype=float).reshape(2, 2)
+        except (TypeError, ValueError):
+            raise InputError(f"{where} has a malformed route in its front") from None
+        routes.append(Route(control, samples, tension, source=source if source.startswith(PRIOR) else PRIOR + source,
+                            exit=exit))
         ratios.append(ratio)
     return PriorLayout(routes, np.array(ratios).T)
 
@@ -115,5 +127,17 @@ def prior_layouts(prior: PriorDesign, problem: Problem) -> list[PriorLayout]:
     this body's walls at its clearance (or flagged with the most it keeps,
     :func:`~tendon_taichi.extract.clearance.clear_route`)."""
     clearance = problem.scene.tendons.clearance * problem.size
-    return [replace(lay, routes=[clear_route(r, problem.walls, clearance) for r in lay.routes])
-            for lay in prior.layouts]
+    return [replace(lay, routes=[_fitted(r, problem, clearance) for r in lay.routes]) for lay in prior.layouts]
+
+
+def _fitted(route: Route, problem: Problem, clearance: float) -> Route:
+    """A prior route kept clear of ``problem``'s walls, and leaving the body where its
+    scene says: one that left where this scene's routes do not, or that stayed inside
+    where they leave, is carried out of the body again (:func:`~tendon_taichi.extract.exits.exit_route`)."""
+    exits = problem.exits
+    if route.exits:
+        _, d, k = (None, [np.inf], None) if exits is None else exits.nearest(route.control[-1:])
+        route = replace(route, exit=None if d[0] > 1e-9 * problem.size else exits.segments[k[0]].copy())
+    if exits is not None and not route.exits:
+        return exit_route(route, problem, clearance)
+    return clear_route(route, problem.walls, clearance)

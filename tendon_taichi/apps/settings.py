@@ -59,6 +59,7 @@ class ExtractSettings:
         plugin_timeout: seconds an extractor may run.
         friction: the channels' capstan friction, in place of the scene's (None: the scene's).
         clearance: the routes' clearance, x L, in place of the scene's (None: the scene's).
+        exit: where the routes leave the body, in place of the scene's (None: the scene's).
         factor_threads: the threads of every factorization, the workers' too (None: each process's).
     """
 
@@ -71,4 +72,5 @@ class ExtractSettings:
     plugin_timeout: float = PLUGIN_TIMEOUT
     friction: float | None = None
     clearance: float | None = None
+    exit: str | None = None
     factor_threads: int | None = None

@@ -42,7 +42,7 @@ from .provenance import result_provenance
 
 SWEEP_KEYS = ("name", "scenes", "levels", "extractors", "solver", "grid", "set", "consolidation", "front")
 #: grid and set keys that are [tendons] settings (the others are [optimize] ones)
-TENDON_KEYS = ("friction", "clearance")
+TENDON_KEYS = ("friction", "clearance", "exit")
 
 
 class SweepInterrupted(Stopped):

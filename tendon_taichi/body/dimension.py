@@ -13,6 +13,7 @@ from typing import Callable
 
 from ..dimensions import PerDimension
 from ..errors import SceneError
+from .exits import ExitSet, plane_exits
 from .fibers import FiberGraph, build_lattice
 from .mesh import Mesh
 from .plane import plane_mesh, plane_walls
@@ -31,6 +32,9 @@ class Dimension:
         walls: ``walls(scene, mesh)``, the body's boundary for route clearance.
         lattice: ``lattice(mesh, spacing, tol)``, the fiber lattice of ``spacing``
             (m) clipped to the body, ``tol`` (m) its closed-inside tolerance.
+        exits: ``exits(scene, walls, clearance)``, where a route may leave the body
+            (:class:`~.exits.ExitSet`; None for ``exit = "inside"``); None: this
+            dimension's bodies have no exits yet.
     """
 
     dim: int
@@ -38,10 +42,11 @@ class Dimension:
     mesh: Callable[[Scene, int], Mesh]
     walls: Callable[[Scene, Mesh], Walls]
     lattice: Callable[[Mesh, float, float], FiberGraph]
+    exits: Callable[[Scene, Walls, float], ExitSet | None] | None = None
 
 
 #: 2D bodies: triangles, the polygon walls, the 8-neighbour lattice
-PLANE = Dimension(2, "triangle", plane_mesh, plane_walls, build_lattice)
+PLANE = Dimension(2, "triangle", plane_mesh, plane_walls, build_lattice, exits=plane_exits)
 
 #: the dimensions bodies may have, by ``dim``
 DIMENSIONS = PerDimension("dimension", {PLANE.dim: PLANE})

@@ -19,6 +19,7 @@ from .fibers import FiberGraph
 from .level import level_scale
 from .mesh import Embedding, Mesh
 from .scene import Scene
+from .exits import ExitSet
 from .walls import Walls
 
 
@@ -73,6 +74,17 @@ class Problem:
         """The body's walls (:class:`~.walls.Walls`): in 2D its outline and holes (from
         the scene, or the mesh's triangles)."""
         return self.dimension.walls(self.scene, self.mesh)
+
+    @cached_property
+    def exits(self) -> ExitSet | None:
+        """Where a route may leave the body (:class:`~.exits.ExitSet`, the scene's
+        ``[tendons] exit``), None where its pull end stays inside (``"inside"``)."""
+        if self.scene.tendons.exit == "inside":
+            return None
+        if self.dimension.exits is None:
+            raise SceneError(f"{self.scene.origin}: tendons.exit = \"{self.scene.tendons.exit}\" is not "
+                             f"available for {self.dim}D bodies yet")
+        return self.dimension.exits(self.scene, self.walls, self.scene.tendons.clearance * self.size)
 
     def coarser_meshes(self) -> list[Mesh]:
         """The body meshed at every other coarser level, ``level - 2``, ``level - 4``,
@@ -166,4 +178,6 @@ def build_problem(scene: Scene, level: int = 1) -> Problem:
         where = ", ".join(f"{c:g}" for c in points[i])
         raise SceneError(f"{scene.origin}: {scene.target_label(i)}.point [{where}] lies outside the body")
     goals = np.array([t.goal for t in scene.targets], dtype=float)
-    return Problem(scene, int(level), mesh, fixed, fibers, target=target, target_goal=goals)
+    problem = Problem(scene, int(level), mesh, fixed, fibers, target=target, target_goal=goals)
+    problem.exits  # noqa: B018  (a clamp that does not meet the outline is bad input: said now)
+    return problem

@@ -104,16 +104,21 @@ class FiberSettings:
 MAX_FRICTION = 2.0
 #: the largest clearance (fraction of L): a route must fit between the walls
 MAX_CLEARANCE = 0.2
+#: where a tendon may leave the body (``docs/method.md``, exits): its pull end inside the body,
+#: on the outline where a [[fixed]] box clamps it, or anywhere on the outline
+EXITS = ("inside", "clamp", "surface")
 
 
 @dataclass(frozen=True)
 class TendonSettings:
     """The built tendons (``docs/method.md``, friction and routes): ``friction`` mu
     of the capstan factor exp(-mu Theta) in the realizable robot and the metrics;
-    ``clearance`` the least distance of a route from the outline and holes, x L."""
+    ``clearance`` the least distance of a route from the outline and holes, x L;
+    ``exit`` where a route's pull end leaves the body (:data:`EXITS`)."""
 
     friction: float = 0.1
     clearance: float = 0.02
+    exit: str = "inside"
 
     def checked(self, origin: str = "command line") -> "TendonSettings":
         """Itself, or a SceneError naming the first value out of range."""
@@ -122,6 +127,9 @@ class TendonSettings:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) \
                     or not 0.0 <= value <= top:
                 raise SceneError(f"{origin}: tendons.{key} must be a number in [0, {top:g}] (got {value!r})")
+        if self.exit not in EXITS:
+            raise SceneError(f"{origin}: tendons.exit must be one of {', '.join(map(repr, EXITS))} "
+                             f"(got {self.exit!r})")
         return self
 
 
@@ -136,6 +144,12 @@ class Box:
         p = np.asarray(points, dtype=float)
         lo, hi = np.asarray(self.lo), np.asarray(self.hi)
         return np.all((p >= lo - tol) & (p <= hi + tol), axis=1)
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """The distance (q,) m of points (q, dim) from the box (0 inside it)."""
+        p = np.asarray(points, dtype=float)
+        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
+        return np.linalg.norm(np.maximum(np.maximum(lo - p, p - hi), 0.0), axis=1)
 
 
 @dataclass(frozen=True)
@@ -167,6 +181,10 @@ class Scene:
     source: str
     origin: str  # a file path, or "builtin:<name>"
     tendons: TendonSettings = TendonSettings()
+
+    def clamp_distance(self, points: np.ndarray) -> np.ndarray:
+        """The distance (q,) m of points (q, dim) from the nearest [[fixed]] box."""
+        return np.min([box.distance(points) for box in self.fixed], axis=0)
 
     @property
     def targets(self) -> tuple[Target, ...]:
@@ -264,7 +282,8 @@ def _read_fibers(r: TableReader) -> FiberSettings:
 def _read_tendons(r: TableReader) -> TendonSettings:
     d = TendonSettings()
     ts = TendonSettings(friction=r.number("friction", d.friction, ge=0.0, le=MAX_FRICTION),
-                        clearance=r.number("clearance", d.clearance, ge=0.0, le=MAX_CLEARANCE))
+                        clearance=r.number("clearance", d.clearance, ge=0.0, le=MAX_CLEARANCE),
+                        exit=r.choice("exit", d.exit, EXITS))
     r.finish()
     return ts
 

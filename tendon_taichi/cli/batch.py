@@ -48,6 +48,7 @@ def cmd_bench(args) -> int:
 # ------------------------------------------------------------------ planted
 def cmd_planted(args) -> int:
     from ..planted.plant import MAX_TENDONS, plant, write_planted
+    from ..planted.walk import PlantSettings
     from ..body.scene import load_scene
 
     t0 = time.perf_counter()
@@ -58,7 +59,8 @@ def cmd_planted(args) -> int:
     scene = load_scene(args.scene)
     if not 1 <= args.poses <= 4:
         raise InputError(f"--poses must be 1..4 (got {args.poses})")
-    text, layout = plant(scene, args.tendons, args.seed, args.level, poses=args.poses)
+    text, layout = plant(scene, args.tendons, args.seed, args.level, poses=args.poses,
+                         settings=PlantSettings(exit=args.exit))
     toml_path, json_path = write_planted(args.out, text, layout)
     pose = layout["pose"]
     summary = {"name": layout["name"], "scene": layout["scene"], "tendons": args.tendons,
@@ -198,6 +200,10 @@ def add_commands(sub) -> None:
     add_level_flag(s, 2, "resolution level of the planted equilibrium (default 2)")
     s.add_argument("--poses", type=int, default=1, metavar="P",
                    help="target poses made by the same tendons, 1..4 (default 1)")
+    s.add_argument("--exit", default="clamp", choices=("clamp", "surface", "inside"),
+                   help="where the planted tendons leave the body, written into the scene as its [tendons] "
+                        "exit (default: clamp, behind the clamped base; inside: their pull ends float inside "
+                        "the body, as in the suite drawn before exits)")
     s.add_argument("--out", default=".", metavar="DIR",
                    help="writes DIR/<scene>_planted_<N>t_s<S>[_<P>p].toml and .json (default: .)")
     add_json(s)

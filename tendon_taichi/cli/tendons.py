@@ -144,24 +144,28 @@ def front_settings(args) -> dict:
 
 
 def add_tendon_flags(p: argparse.ArgumentParser) -> None:
-    """``--friction`` and ``--clearance``: the scene's [tendons] settings, replaced."""
+    """``--friction``, ``--clearance`` and ``--exit``: the scene's [tendons] settings, replaced."""
     p.add_argument("--friction", type=float, default=None, metavar="MU",
                    help="capstan friction coefficient of the tendon channels, 0..2 (default: the scene's "
                         "[tendons] friction, 0.1; 0: frictionless)")
     p.add_argument("--clearance", type=float, default=None, metavar="F",
                    help="least distance of a route from the outline and holes, F x L, 0..0.2 (default: "
                         "the scene's [tendons] clearance, 0.02)")
+    p.add_argument("--exit", default=None, choices=("inside", "clamp", "surface"),
+                   help="where a tendon leaves the body: its pull end inside it, on the outline where it "
+                        "is clamped, or anywhere on the outline (default: the scene's [tendons] exit, "
+                        "'inside' for 2D scenes that do not say)")
 
 
 def tendon_settings(args) -> dict:
-    """``friction`` and ``clearance`` of the command line (None: the scene's), validated."""
+    """``friction``, ``clearance`` and ``exit`` of the command line (None: the scene's), validated."""
     from ..body.scene import MAX_CLEARANCE, MAX_FRICTION
 
     for flag, value, top in (("--friction", args.friction, MAX_FRICTION),
                              ("--clearance", args.clearance, MAX_CLEARANCE)):
         if value is not None and not (math.isfinite(value) and 0.0 <= value <= top):
             raise InputError(f"{flag} must be a number in [0, {top:g}] (got {value:g})")
-    return {"friction": args.friction, "clearance": args.clearance}
+    return {"friction": args.friction, "clearance": args.clearance, "exit": args.exit}
 
 
 def consolidation(args, budget: float | None = None) -> ConsolidationSettings:

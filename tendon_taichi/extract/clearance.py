@@ -20,7 +20,9 @@ clearance ``t`` it can:
 and then the least change that keeps that ``t``; such a route is *flagged*: its
 ``kept_clearance`` says what it keeps, and it is never left out.
 An end that runs head-on into a wall is first cut back along the route to where
-it keeps ``h`` (the tendon then ends inside the body).
+it keeps ``h`` (the tendon then ends inside the body). A route that leaves the
+body (:mod:`.exits`) keeps its exit where it is and sees the walls lifted within
+the exit's zone (:func:`route_walls`).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from dataclasses import replace
 import numpy as np
 import scipy.optimize as so
 
+from ..body.exits import ExitWalls
 from ..body.walls import Walls
 from .routes import Route, fit_control, resample
 
@@ -63,6 +66,12 @@ def along_segments(B: np.ndarray, parts: int) -> np.ndarray:
     return np.vstack([rows.reshape(-1, B.shape[1]), B[-1:]])
 
 
+def route_walls(route: Route, walls: Walls, clearance: float) -> Walls:
+    """The walls as ``route`` is held to them: as they are, or for a route that leaves
+    the body, lifted within its exit's zone (:class:`~tendon_taichi.body.exits.ExitWalls`)."""
+    return walls if route.exit is None else ExitWalls(walls, route.control[-1], clearance)
+
+
 def held_clearance(route: Route, clearance: float) -> float:
     """The clearance (m) ``route`` is held to: the asked ``clearance``, or less
     where it is flagged (it keeps less, :func:`clear_route`)."""
@@ -86,7 +95,9 @@ def clear_route(route: Route, walls: Walls, clearance: float) -> Route:
     """The route moved least so that its polyline keeps ``clearance`` (m) from
     ``walls`` (module docstring); where that cannot be done, the route that keeps
     the largest clearance it can, flagged with it (``kept_clearance``, m). A route
-    that keeps the clearance already comes back as it is (unflagged)."""
+    that keeps the clearance already comes back as it is (unflagged); one that
+    leaves the body keeps its exit."""
+    walls = route_walls(route, walls, clearance)
     target = clearance * (1.0 - CLEAR_TOL)
     if walls.polyline_distance(route.waypoints) >= target:
         return route if route.kept_clearance is None else replace(route, kept_clearance=None)
@@ -126,6 +137,9 @@ class _Fit:
         lack = max(0.0, h - float(walls.distance(self.p * h).min()))
         reach = REACH * (h + lack) / h
         self.bounds = [(v - reach, v + reach) for v in route.control.ravel() / h]
+        if route.exit is not None:  # the exit stays where it is
+            dim = route.control.shape[1]
+            self.bounds[-dim:] = [(v, v) for v in route.control[-1] / h]
 
     def change(self, u: np.ndarray) -> tuple[float, np.ndarray]:
         """f and its gradient at u."""

@@ -58,6 +58,7 @@ from .context import Context
 from .protocol import IdealizedState, Tendon, turn_angles
 from .realizable import RealizableResult, pose_tension, predict_realizable, solve_realizable_poses, warm_ratios
 from .clearance import clear_route, held_clearance, keeps_as_much
+from .exits import exit_route
 from .routes import Route, fit_route, join_routes, sample_count
 from .routing import PRICE_PER_BUDGET, RouteSettings, optimize_routes, shape_cost
 from .settings import ConsolidationSettings
@@ -67,6 +68,14 @@ from .settings import ConsolidationSettings
 #: bound are route-optimized (one round each) to try to bring them within
 REACH = 4.0
 PROBES = 2
+#: a route is joined only with its JOIN_PARTNERS nearest routes (by the distance between their
+#: nearest ends), so a layout of n routes has O(n) joins, not O(n^2); with at most
+#: JOIN_PARTNERS + 1 routes every pair is a partner
+JOIN_PARTNERS = 3
+#: pieces of one strand (:func:`merge_pieces`): ends at most MERGE_GAP x L apart, running on in
+#: line (tangents and the gap within MERGE_ANGLE of each other)
+MERGE_GAP = 0.04
+MERGE_ANGLE = np.radians(25.0)
 
 
 @dataclass
@@ -296,10 +305,14 @@ class _Search:
     def _screened(self, candidates: list[Candidate], now: Layout) -> list[Candidate]:
         """The ``screen`` candidates of least cost as one Gauss-Newton step predicts
         them from the current layout's solution, each with its predicted contractions."""
-        found = self.each(self.predict, _predict_task, [(c.routes, c.start, now) for c in candidates])
+        found = self.predicted(candidates, now)
         scored = [(cost, c._replace(start=ratios)) for c, (cost, ratios) in zip(candidates, found) if cost is not None]
         scored.sort(key=lambda s: s[0])
         return [c for _, c in scored[:self.options.screen]]
+
+    def predicted(self, candidates: list[Candidate], now: Layout) -> list[tuple[float | None, np.ndarray | None]]:
+        """:meth:`predict` for each candidate, in order (shared with the workers)."""
+        return self.each(self.predict, _predict_task, [(c.routes, c.start, now) for c in candidates])
 
     def predict(self, routes: list[Route], start: np.ndarray, now: Layout) -> tuple[float | None, np.ndarray | None]:
         """The cost of ``routes`` and their contractions (P, T) as one Gauss-Newton step
@@ -315,42 +328,34 @@ class _Search:
 
     # ------------------------------------------------------------ candidates
     def reductions(self, now: Layout) -> list[Candidate]:
-        """Every drop and every join of the current layout."""
+        """Every drop of the current layout, and every join of two partner routes
+        (:func:`partner_pairs`: each with its ``JOIN_PARTNERS`` nearest)."""
         routes, start = now.routes, np.atleast_2d(now.realizable.ratios).reshape(self.problem.n_poses, -1)
         out = []
         for i in range(len(routes)):
             out.append(Candidate("drop", (i,), routes[:i] + routes[i + 1:], np.delete(start, i, axis=1)))
         reach = self.options.gap * self.problem.size
         clearance = self.rs.clearance
-        for i in range(len(routes)):
-            for j in range(i + 1, len(routes)):
-                rest = [r for k, r in enumerate(routes) if k not in (i, j)]
-                rest_start = np.delete(start, [i, j], axis=1)
-                for joined in self.joins(routes[i], routes[j], reach, clearance):
-                    s = np.concatenate([rest_start, 0.5 * (start[:, [i]] + start[:, [j]])], axis=1)
-                    out.append(Candidate("join", (i, j), rest + [joined], s))
+        for i, j in partner_pairs(routes):
+            rest = [r for k, r in enumerate(routes) if k not in (i, j)]
+            rest_start = np.delete(start, [i, j], axis=1)
+            for joined in self.joins(routes[i], routes[j], reach, clearance):
+                s = np.concatenate([rest_start, 0.5 * (start[:, [i]] + start[:, [j]])], axis=1)
+                out.append(Candidate("join", (i, j), rest + [joined], s))
         return out
 
     def joins(self, a: Route, b: Route, reach: float, clearance: float) -> list[Route]:
-        """Every smooth join of ``a`` and ``b`` end to end (either end of each) whose
-        ends are within ``reach`` and that keeps the clearance (as much of it as the
-        one of them that keeps less, where one is flagged)."""
-        out = []
-        least = min(held_clearance(a, clearance), held_clearance(b, clearance))
-        for a2 in (a, a.reversed()):  # a2 ends at the joint
-            for b2 in (b, b.reversed()):  # b2 starts there
-                if np.linalg.norm(a2.control[-1] - b2.control[0]) > reach:
-                    continue
-                joined = clear_route(join_routes(a2, b2, self.problem.size), self.problem.walls, clearance)
-                if keeps_as_much(joined, least, clearance):
-                    out.append(joined)
-        return out
+        """:func:`smooth_joins` of ``a`` and ``b`` in this search's body."""
+        return smooth_joins(a, b, self.problem, reach, clearance)
 
     # ------------------------------------------------------------ routes
     def orient(self, now: Layout) -> tuple[Layout, list[int]]:
-        """Each route pulled at the end that serves the pose at least cost."""
+        """Each route pulled at the end that serves the pose at least cost (a route
+        that leaves the body is pulled where it leaves)."""
         flipped = []
         for i in range(now.count):
+            if now.routes[i].exits:
+                continue
             routes = list(now.routes)
             routes[i] = routes[i].reversed()
             lay = self.solve(routes, np.atleast_2d(now.realizable.ratios).reshape(self.problem.n_poses, -1), now)
@@ -382,8 +387,7 @@ class _Search:
         rs = self.rs if iterations is None else replace(self.rs, iterations=iterations)
         for k in range(rounds if now.routes else 0):
             size = self.problem.size
-            routes = [Route(r.control, sample_count(r.length, size), r.tension, r.tension_std, r.source,
-                            kept_clearance=r.kept_clearance) for r in now.routes]
+            routes = [replace(r, samples=sample_count(r.length, size), contraction=None) for r in now.routes]
             routes = [clear_route(r, self.problem.walls, self.rs.clearance) for r in routes]
             real = now.realizable
             self.log(f"{self.source}: optimizing {len(routes)} route(s), round {k + 1}")
@@ -415,6 +419,92 @@ def _predict_task(spec: tuple, job: tuple[list[Route], np.ndarray, Layout]) -> t
     return search.predict(*job), search.tally()
 
 
+def smooth_joins(a: Route, b: Route, problem: Problem, reach: float, clearance: float) -> list[Route]:
+    """Every smooth join of ``a`` and ``b`` end to end (either end of each) whose
+    ends are within ``reach`` (m) and that keeps the ``clearance`` (m; as much of it
+    as the one of them that keeps less, where one is flagged); where routes leave
+    the body, of their cores, carried out of the body again (:func:`~.exits.exit_route`)."""
+    out = []
+    least = min(held_clearance(a, clearance), held_clearance(b, clearance))
+    a, b = a.inner(), b.inner()  # routes that leave the body are joined without their runs out
+    for a2 in (a, a.reversed()):  # a2 ends at the joint
+        for b2 in (b, b.reversed()):  # b2 starts there
+            if np.linalg.norm(a2.control[-1] - b2.control[0]) > reach:
+                continue
+            joined = exit_route(join_routes(a2, b2, problem.size), problem, clearance)
+            if keeps_as_much(joined, least, clearance):
+                out.append(joined)
+    return out
+
+
+def end_distances(routes: list[Route]) -> np.ndarray:
+    """(T, T): the least distance between an end of route i and an end of route j
+    (cores' ends for routes that leave the body; inf on the diagonal)."""
+    ends = np.array([r.inner().control[[0, -1]] for r in routes]).reshape(len(routes), 2, -1)
+    d = np.linalg.norm(ends[:, None, :, None, :] - ends[None, :, None, :, :], axis=-1).min(axis=(2, 3))
+    np.fill_diagonal(d, np.inf)
+    return d
+
+
+def partner_pairs(routes: list[Route], partners: int = JOIN_PARTNERS) -> list[tuple[int, int]]:
+    """The pairs (i, j), i < j, in order, where j is among i's ``partners`` nearest
+    routes (:func:`end_distances`) or i among j's: at most ``partners`` x T pairs of
+    T routes, every pair where T <= partners + 1."""
+    n = len(routes)
+    if n <= partners + 1:
+        return [(i, j) for i in range(n) for j in range(i + 1, n)]
+    near = np.argsort(end_distances(routes), axis=1, kind="stable")[:, :partners]
+    pairs = {(min(i, int(j)), max(i, int(j))) for i in range(n) for j in near[i]}
+    return sorted(pairs)
+
+
+def _in_line(a: Route, b: Route, gap: float) -> bool:
+    """Whether ``a`` (ending where ``b`` starts) runs on into ``b``: their ends within
+    ``gap`` and the tangents there, and the gap between, within MERGE_ANGLE."""
+    pa, pb = a.waypoints, b.waypoints
+    step = pb[0] - pa[-1]
+    if np.linalg.norm(step) > gap:
+        return False
+    dirs = [pa[-1] - pa[-2], pb[1] - pb[0]] + ([step] if np.linalg.norm(step) > 1e-9 * gap else [])
+    unit = [d / max(float(np.linalg.norm(d)), 1e-300) for d in dirs]
+    return all(float(u @ v) >= np.cos(MERGE_ANGLE) for u in unit for v in unit)
+
+
+def merge_pieces(routes: list[Route], tensions: np.ndarray, problem: Problem,
+                 clearance: float) -> tuple[list[Route], np.ndarray]:
+    """Routes (and their tensions (P, T), N) with every two pieces of one strand -
+    ends within ``MERGE_GAP`` x L, running on in line - made one smooth route
+    (:func:`~.routes.join_routes`, kept clear and carried out of the body as the
+    scene says), until none is left: an extractor that breaks a strand where its
+    fibers thin out hands the search fewer, longer routes. A merge that would keep
+    less clearance than its pieces is not made; the merged tension is the
+    length-weighted mean."""
+    routes, tensions = list(routes), np.array(tensions, dtype=float).reshape(-1, len(routes))
+    gap = MERGE_GAP * problem.size
+    merged = True
+    while merged and len(routes) > 1:
+        merged = False
+        for i, j in partner_pairs(routes):
+            a, b = routes[i].inner(), routes[j].inner()
+            for a2, b2 in ((a, b), (a, b.reversed()), (a.reversed(), b), (a.reversed(), b.reversed())):
+                if not _in_line(a2, b2, gap):
+                    continue
+                least = min(held_clearance(routes[i], clearance), held_clearance(routes[j], clearance))
+                one = exit_route(join_routes(a2, b2, problem.size), problem, clearance)
+                if not keeps_as_much(one, least, clearance):
+                    continue
+                w = a.length / max(a.length + b.length, 1e-300)
+                t = w * tensions[:, i] + (1 - w) * tensions[:, j]
+                keep = [k for k in range(len(routes)) if k not in (i, j)]
+                routes = [routes[k] for k in keep] + [replace(one, source=routes[i].source or routes[j].source)]
+                tensions = np.concatenate([tensions[:, keep], t[:, None]], axis=1)
+                merged = True
+                break
+            if merged:
+                break
+    return routes, tensions
+
+
 def positions(real: RealizableResult) -> list[np.ndarray]:
     """Each pose's equilibrium (n, 2) of a solved robot."""
     return [real.x] if real.poses is None else [p.x for p in real.poses]
@@ -424,11 +514,12 @@ def extracted_routes(problem: Problem, tendons: list[Tendon], state: IdealizedSt
                      source: str = "") -> tuple[list[Route], np.ndarray]:
     """Each extracted tendon as a smooth route that keeps ``clearance`` (m) from the
     walls - or, where the body is too narrow for it, the largest clearance it can,
-    flagged (:func:`~.clearance.clear_route`); none is left out - and the routes'
+    flagged (:func:`~.clearance.clear_route`); none is left out - and that leaves
+    the body where the scene says (:func:`~.exits.exit_route`), and the routes'
     tensions in each pose (P, T), N, from their tendons' fibers."""
     states = state.poses or [state]
-    routes = [clear_route(fit_route(t.waypoints, problem.size, t.tension, t.tension_std, source), problem.walls,
-                          clearance) for t in tendons]
+    routes = [exit_route(fit_route(t.waypoints, problem.size, t.tension, t.tension_std, source), problem, clearance)
+              for t in tendons]
     tensions = [[pose_tension(st, t) for st in states] for t in tendons]
     return routes, np.array(tensions).reshape(len(routes), len(states)).T
 
@@ -442,6 +533,11 @@ def consolidate(context: Context, tendons: list[Tendon], options: ConsolidationS
     rs = route_settings(context.problem, options)
     search = _Search(context, options, rs, source)
     routes, tensions = extracted_routes(context.problem, tendons, context.state, rs.clearance, source)
+    if options.enabled:
+        count = len(routes)
+        routes, tensions = merge_pieces(routes, tensions, context.problem, rs.clearance)
+        if len(routes) < count:
+            search.log(f"{source}: {count} extracted tendons are {len(routes)} strands (pieces in line merged)")
     for i, r in enumerate(routes):
         if r.kept_clearance is not None:
             search.log(f"{source}: route {i + 1} keeps {1e3 * r.kept_clearance:.2f} mm of the "

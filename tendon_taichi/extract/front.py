@@ -16,9 +16,11 @@ tendons together:
   Gauss-Newton step, the best solved in full), and the results compete with
   the seeds of the count below;
 * **exhaustive low counts**: for k up to ``EXHAUSTIVE``, every pooled route
-  alone and every smooth join of two (k = 1), every set of k pooled routes
-  (k > 1) are screened from the best layout of the count above and the best
-  solved in full; the ``beam`` best of them and the one of least pose error
+  alone and every smooth join of two partners (each route with its
+  ``JOIN_PARTNERS`` nearest; k = 1), every set of k pooled routes (k > 1; from a
+  pool of more than ``PAIR_POOL``, the pairs among the routes the screen ranks
+  best alone and each with the best, :func:`_pairs`) are screened from the best
+  layout of the count above and the best solved in full; the ``beam`` best of them and the one of least pose error
   join the beam's layouts of that count (beside them: the beam's path is the
   same with or without them). Which few routes a small layout keeps matters
   most, and where the beam's path from the most tendons leads depends on the
@@ -87,16 +89,20 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field, replace
 from functools import partial
-from itertools import combinations
 from typing import Callable
 
 import numpy as np
 
 from ..probes import probe
 from .consolidation import Candidate, Consolidation, Layout, _Search, positions, route_settings
-from .clearance import clear_route, held_clearance, keeps_as_much
+from .clearance import held_clearance, keeps_as_much
+from .exits import exit_route
 from .context import Context
-from .routes import Route, extend_route, resample
+from .layouts import SAME_ROUTE, distinct_routes, same_route, sources  # noqa: F401  (their import path before)
+from .layouts import best_layouts as _best, layout_key as _key
+from .pooled import PAIR_POOL, pooled_candidates  # noqa: F401  (their import path before they moved)
+from .pooled import exhaustive_layouts as _exhaustive, kept_layouts as _kept
+from .routes import Route, extend_route
 from .settings import ConsolidationSettings, FrontSettings
 
 #: the front joins routes whose ends are up to this far apart (x L; consolidation's --join-gap when
@@ -111,8 +117,6 @@ EXHAUSTIVE = 2
 #: energy's cubic zone, a tension of EA eps TAUT^2 / 2) at that layout's equilibria: the soft IK
 #: starts where the smaller layout ended, and the route's tension still has a gradient there
 TAUT = 0.25
-#: two routes closer than this (mean distance between their resampled polylines, x L) are one route
-SAME_ROUTE = 0.02
 #: a route whose tension is at most this fraction of its layout's largest, in every pose, is slack
 SLACK = 1e-6
 #: the extension tries each route end carried on straight by this much (x L, :func:`_extensions`)
@@ -176,47 +180,6 @@ class Front:
                 "evaluations": self.evaluations, "screened": self.screened,
                 "route_evaluations": self.route_evaluations, "route_s": self.route_s, "time_s": self.time_s,
                 "refit": list(self.refit), "slack": list(self.slack)}
-
-
-def same_route(a: Route, b: Route, size: float, tol: float = SAME_ROUTE) -> bool:
-    """Whether two routes run along the same curve (either way round): the mean
-    distance between their polylines, resampled at 32 points, is below ``tol`` x L."""
-    pa = resample(a.waypoints, 32)[0]
-    pb = resample(b.waypoints, 32)[0]
-    d = min(np.linalg.norm(pa - pb, axis=1).mean(), np.linalg.norm(pa - pb[::-1], axis=1).mean())
-    return bool(d < tol * size)
-
-
-def distinct_routes(routes: list[Route], size: float) -> list[Route]:
-    """``routes`` with near duplicates (:func:`same_route`) kept once, the first seen."""
-    out: list[Route] = []
-    for r in routes:
-        if not any(same_route(r, q, size) for q in out):
-            out.append(r)
-    return out
-
-
-def sources(routes: list[Route]) -> str:
-    """The extractors a layout's routes came from, joined by '+'."""
-    return "+".join(sorted({r.source for r in routes if r.source})) or "front"
-
-
-def _key(layout: Layout, size: float) -> tuple:
-    """A layout's identity: its routes' control points (to 1e-4 L), in any order."""
-    return tuple(sorted(np.round(r.control / size, 4).tobytes() for r in layout.routes))
-
-
-def _best(layouts: list[Layout], n: int, size: float) -> list[Layout]:
-    """The ``n`` distinct layouts of least cost."""
-    out, seen = [], set()
-    for lay in sorted(layouts, key=lambda lay: lay.cost):
-        k = _key(lay, size)
-        if k not in seen:
-            seen.add(k)
-            out.append(lay)
-        if len(out) == n:
-            break
-    return out
 
 
 def search_front(context: Context, consolidations: list[Consolidation], options: ConsolidationSettings,
@@ -317,46 +280,6 @@ def search_front(context: Context, consolidations: list[Consolidation], options:
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
     front.time_s, front.on_finished = time.perf_counter() - t0, None
     return front
-
-
-def pooled_candidates(search: _Search, pool: list[Route], k: int) -> list[Candidate]:
-    """Every layout of ``k`` routes from the pool: for k = 1 each pooled route
-    alone ('route') and each smooth join of two within the search's gap ('join'),
-    for k > 1 each set of k pooled routes ('set'); each to start from the
-    contractions that give its routes their strands' tensions in every pose."""
-    P = search.problem.n_poses
-
-    def cand(action: str, ids: tuple[int, ...], routes: list[Route]) -> Candidate:
-        tensions = np.tile([r.tension for r in routes], (P, 1))
-        return Candidate(action, ids, routes, search.start_ratios(routes, tensions))
-
-    if k > 1:
-        return [cand("set", ids, [pool[i] for i in ids]) for ids in combinations(range(len(pool)), k)]
-    reach, clearance = search.options.gap * search.problem.size, search.rs.clearance
-    out = [cand("route", (i,), [r]) for i, r in enumerate(pool)]
-    for i, j in combinations(range(len(pool)), 2):
-        out += [cand("join", (i, j), [joined]) for joined in search.joins(pool[i], pool[j], reach, clearance)]
-    return out
-
-
-def _exhaustive(search: _Search, pool: list[Route], k: int, near: Layout) -> list[Layout]:
-    """The pooled layouts of ``k`` routes (:func:`pooled_candidates`), screened by
-    one Gauss-Newton step from ``near``'s equilibria, the best solved in full."""
-    cands = pooled_candidates(search, pool, k)
-    search.log(f"front: {len(cands)} {k}-tendon layout(s) from the {len(pool)} pooled routes")
-    ranked = search.ranked(cands, near)
-    return [replace(lay, source=sources(lay.routes)) for _, lay in ranked]
-
-
-def _kept(layouts: list[Layout], n: int, size: float) -> list[Layout]:
-    """The ``n`` least costly distinct layouts, and the one of least pose error
-    besides: a fresh join's shape cost is that of a rough fit, which route
-    optimization smooths away, and its pose error shows better what it can do."""
-    out = _best(layouts, n, size)
-    closest = min(layouts, key=lambda lay: lay.error, default=None)
-    if closest is not None and _key(closest, size) not in {_key(lay, size) for lay in out}:
-        out.append(closest)
-    return out
 
 
 def slack_routes(layout: Layout) -> list[int]:
@@ -511,13 +434,14 @@ def _repair(search: _Search, front: Front, pool: list[Route], size: float, chang
 def _extension_jobs(search: _Search, layout: Layout, size: float) -> list[tuple]:
     """The jobs of :func:`_screened` for the solved ``layout``: its routes with one
     route end carried on straight by ``EXTEND`` x L (:func:`~.routes.extend_route`;
-    each end of each route, kept clear of the walls as the route was; an end the
+    each end of each route - the anchor of one that leaves the body, whose core is
+    carried on and out again -, kept clear of the walls as the route was; an end the
     walls cut back to less than half that is left out)."""
     jobs = []
     c = search.rs.clearance
     for i, route in enumerate(layout.routes):
-        for end in (0, 1):
-            longer = clear_route(extend_route(route, end, EXTEND * size, size), search.problem.walls, c)
+        for end in ((0,) if route.exits else (0, 1)):  # a route that leaves the body, at its anchor
+            longer = exit_route(extend_route(route.inner(), end, EXTEND * size, size), search.problem, c)
             if (not keeps_as_much(longer, held_clearance(route, c), c)
                     or longer.length < route.length + 0.5 * EXTEND * size):
                 continue

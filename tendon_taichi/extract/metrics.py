@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..body.exits import ExitWalls
 from .protocol import IdealizedState, Tendon
 
 
@@ -64,7 +65,8 @@ def tendon_metrics(problem, state: IdealizedState, tendons: list[Tendon],
     tendons; ``tension_cvs`` per tendon), ``coverage`` (the share of the
     idealized active tension-length sum tau_i a0_i that the tendons carry,
     :func:`covered_fibers`), ``clearances``, each tendon's least distance from
-    the outline and holes, m (negative where one leaves the body), and
+    the outline and holes, m (negative where one leaves the body; for one that
+    leaves through its exit, outside the exit's zone), and
     ``clearance_min``, the least of them (None with no tendon)."""
     s = settings or MetricSettings()
     a0 = problem.fibers.a0
@@ -77,7 +79,9 @@ def tendon_metrics(problem, state: IdealizedState, tendons: list[Tendon],
     total = float((state.tau[active] * a0[active]).sum())
     used = active[covered_fibers(problem, tendons, active)]
     covered = float((state.tau[used] * a0[used]).sum())
-    clearances = [problem.walls.polyline_distance(t.waypoints) for t in tendons]
+    h = problem.scene.tendons.clearance * problem.size
+    clearances = [problem.walls.polyline_distance(t.waypoints) if t.exit is None
+                  else ExitWalls(problem.walls, t.exit, h).kept(t.waypoints) for t in tendons]
     return {
         "count": len(tendons),
         "total_length": float(sum(t.length for t in tendons)),

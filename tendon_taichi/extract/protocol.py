@@ -66,7 +66,9 @@ class Tendon:
     at the last; ``tension`` and ``tension_std`` (N) of its active source fibers.
     ``contraction`` (m) is set when the realizable robot is solved. A smooth
     route off the lattice (what consolidation makes of an extractor's tendons)
-    has no ``nodes`` or ``fibers`` and its spline's ``control`` points (m, 2)."""
+    has no ``nodes`` or ``fibers`` and its spline's ``control`` points (m, 2);
+    one that leaves the body has its ``exit`` (dim,), the last waypoint, where it
+    runs out through the outline (``docs/method.md``, exits)."""
 
     nodes: np.ndarray
     fibers: np.ndarray
@@ -75,6 +77,7 @@ class Tendon:
     tension_std: float
     contraction: float | None = None
     control: np.ndarray | None = None
+    exit: np.ndarray | None = None
 
     @property
     def on_lattice(self) -> bool:
@@ -104,6 +107,8 @@ class Tendon:
                "anchor": self.anchor.tolist(), "pull_end": self.pull_end.tolist()}
         if self.control is not None:
             out["control_points"] = self.control.tolist()
+        if self.exit is not None:
+            out["exit"] = self.exit.tolist()
         if self.on_lattice:
             out.update(fiber_nodes=[int(v) for v in self.nodes], fibers=[int(f) for f in self.fibers])
         return out

@@ -56,7 +56,10 @@ class Route:
     strand it came from, and ``source``, the extractor (or 'join') that made it;
     ``kept_clearance`` (m): None where the route keeps the asked clearance from the
     walls, else the smaller one it keeps (the body is too narrow for the asked one
-    there, :func:`~.clearance.clear_route`)."""
+    there, :func:`~.clearance.clear_route`). A route that leaves the body
+    (``docs/method.md``, exits) has its pull end on the segment ``exit`` (2, 2) of
+    the body's exit set and ``core``, the route before its run to there
+    (:func:`~.exits.exit_route`); joins and extensions start from the core."""
 
     control: np.ndarray
     samples: int
@@ -65,6 +68,13 @@ class Route:
     source: str = ""
     contraction: float | None = None
     kept_clearance: float | None = None
+    exit: np.ndarray | None = None
+    core: "Route | None" = None
+
+    @property
+    def exits(self) -> bool:
+        """Whether the route leaves the body at its pull end."""
+        return self.exit is not None
 
     @property
     def basis(self) -> np.ndarray:
@@ -83,13 +93,18 @@ class Route:
         return replace(self, control=np.array(control, dtype=float).reshape(-1, 2))
 
     def reversed(self) -> "Route":
-        """The same curve pulled at the other end."""
-        return self.with_control(self.control[::-1])
+        """The same curve pulled at the other end (a route that leaves the body no longer does)."""
+        return replace(self.with_control(self.control[::-1]), exit=None, core=None)
+
+    def inner(self) -> "Route":
+        """The route without its run out of the body: its core, or itself."""
+        return self if self.core is None else self.core
 
     def tendon(self) -> Tendon:
         """The route as a tendon of the realizable robot (waypoints off the lattice)."""
         return Tendon(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), self.waypoints, self.tension,
-                      self.tension_std, contraction=self.contraction, control=self.control.copy())
+                      self.tension_std, contraction=self.contraction, control=self.control.copy(),
+                      exit=None if self.exit is None else self.control[-1].copy())
 
 
 def resample(points: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -7,7 +7,9 @@ moved together to minimize
       + w_bend sum_j max(0, |theta_j| - theta_max)^2     (bends sharper than a channel takes)
       + w_bend sum_t max(0, Theta_t - Theta_max)^2       (routes that turn back on themselves)
 
-subject to ``d_i >= c`` (every waypoint keeps the clearance from the walls).
+subject to ``d_i >= c`` (every waypoint keeps the clearance from the walls; a
+route that leaves the body, but within its exit's zone, :mod:`.exits`, and with
+its exit held on its exit segment).
 ``Theta_t`` is route t's rest turning (smoothed where it is straight),
 ``theta_j`` the turn at one of its waypoints, ``d_i`` a waypoint's distance
 from the walls and ``c`` the clearance. The friction price ``w_fric`` is
@@ -48,7 +50,7 @@ from ..optimizer.soft_ik import SoftIK
 from ..physics.capstan import perp
 from ..physics.waypoints import rest_point_gradient
 from ..probes import probe
-from .clearance import CLEAR_TOL, held_clearance
+from .clearance import CLEAR_TOL, held_clearance, route_walls
 from .context import Context
 from .realizable import tendon_cables
 from .routes import Route, polyline_length
@@ -185,13 +187,35 @@ class RouteObjective:
         return routes, z[self.n_control:].reshape(self.problem.n_poses, len(self.routes))
 
     def bounds(self) -> so.Bounds:
-        """Control points within the body's bounding box, ratios within [-pmax, STROKE cmax]."""
+        """Control points within the body's bounding box (an exit within its segment's),
+        ratios within [-pmax, STROKE cmax]."""
         lo, hi = self.problem.mesh.nodes.min(axis=0) / self.L, self.problem.mesh.nodes.max(axis=0) / self.L
         n = sum(self.sizes)
         fs = self.problem.scene.fibers
         r = self.problem.n_poses * len(self.routes)
-        return so.Bounds(np.r_[np.tile(lo, n), np.full(r, -fs.max_payout)],
-                         np.r_[np.tile(hi, n), np.full(r, STROKE * fs.max_contraction)])
+        low, high = np.r_[np.tile(lo, n), np.full(r, -fs.max_payout)], np.r_[np.tile(hi, n),
+                                                                                np.full(r, STROKE * fs.max_contraction)]
+        for last, route in zip(np.cumsum(self.sizes) - 1, self.routes):
+            if route.exits:
+                low[2 * last:2 * last + 2] = route.exit.min(axis=0) / self.L
+                high[2 * last:2 * last + 2] = route.exit.max(axis=0) / self.L
+        return so.Bounds(low, high)
+
+    def on_exits(self) -> list[dict]:
+        """Each exit kept on its segment: ``n . (e - a) = 0`` (n the segment's normal,
+        a its first end, e the route's last control point), a linear equality."""
+        out = []
+        for last, route in zip(np.cumsum(self.sizes) - 1, self.routes):
+            if not route.exits:
+                continue
+            a, b = route.exit
+            t = (b - a) / max(float(np.linalg.norm(b - a)), 1e-300)
+            row = np.zeros(self.n_control + self.problem.n_poses * len(self.routes))
+            row[2 * last:2 * last + 2] = (-t[1], t[0])
+            offset = float(row[2 * last:2 * last + 2] @ a) / self.L
+            out.append({"type": "eq", "fun": lambda z, row=row, offset=offset: np.array([row @ z - offset]),
+                        "jac": lambda z, row=row: row[None, :]})
+        return out
 
     # ------------------------------------------------------------ the clearance constraint
     def clearance(self, z: np.ndarray, jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
@@ -202,14 +226,17 @@ class RouteObjective:
         routes, _ = self.unpack(z)
         values, rows, at = [], [], 0
         for r in routes:
+            walls = route_walls(r, self.walls, self.rs.clearance)
             if jacobian:
-                d, g = self.walls.distance_gradient(r.waypoints)
+                d, g = walls.distance_gradient(r.waypoints)
                 # waypoint i is sum_j B_ij c_j, and z holds c / L: d(d_i / L)/dz_j = B_ij g_i
                 J = np.zeros((len(d), len(z)))
                 J[:, at:at + r.control.size] = (r.basis[:, :, None] * g[:, None, :]).reshape(len(d), -1)
+                if r.exits:  # the lift moves with the exit, the last control point: d lift / d e = -d lift / d p
+                    J[:, at + r.control.size - 2:at + r.control.size] -= walls.lift(r.waypoints)[1]
                 rows.append(J)
             else:
-                d = self.walls.distance(r.waypoints)
+                d = walls.distance(r.waypoints)
             values.append((d - held_clearance(r, self.rs.clearance)) / self.L)
             at += r.control.size
         return np.concatenate(values), (np.vstack(rows) if jacobian else None)
@@ -277,6 +304,18 @@ class RouteObjective:
             g_c.append(r.basis.T @ gX[at:at + len(p)])
             at += len(p)
         return np.concatenate([np.concatenate(g_c).ravel() * self.L, g_r])
+
+
+def _on_segment(route: Route) -> Route:
+    """A route whose exit SLSQP left a rounding error off its segment, with its exit on it."""
+    if not route.exits:
+        return route
+    a, b = route.exit
+    ab = b - a
+    t = np.clip((route.control[-1] - a) @ ab / max(float(ab @ ab), 1e-300), 0.0, 1.0)
+    control = route.control.copy()
+    control[-1] = a + t * ab
+    return route.with_control(control)
 
 
 @dataclass
@@ -348,9 +387,10 @@ def optimize_routes(context: Context, routes: list[Route], ratios: np.ndarray, r
             on_iteration(it["k"], best["f"])
 
     constraint = {"type": "ineq", "fun": clearance, "jac": lambda z: obj.clearance(z)[1]}
-    res = so.minimize(fun, z0, jac=jac, method="SLSQP", bounds=obj.bounds(), constraints=[constraint],
+    res = so.minimize(fun, z0, jac=jac, method="SLSQP", bounds=obj.bounds(), constraints=[constraint] + obj.on_exits(),
                       callback=callback, options={"maxiter": route_settings.iterations, "ftol": 1e-12})
     found = best if np.isfinite(best["f"]) else lowest
     out_routes, out_ratios = obj.unpack(found["z"])
+    out_routes = [_on_segment(r) for r in out_routes]
     return RoutedLayout(out_routes, out_ratios, objective_start=float(f_start), objective=float(found["f"]),
                         evaluations=obj.evaluations, message=str(res.message))

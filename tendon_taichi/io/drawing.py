@@ -2,7 +2,9 @@
 in the scene) of the rest body - its outline and holes - and the tendons, each
 a smooth path (a route's spline as cubic Bezier segments, exactly; a lattice
 tendon as a polyline) with its anchor (circle) and pull end (square),
-numbered in the order given. Written atomically."""
+numbered in the order given; where tendons leave the body, the stretches of
+the outline they may leave through (green) and, on each that does, a dashed
+line out of the body where it leaves. Written atomically."""
 
 from __future__ import annotations
 
@@ -70,10 +72,20 @@ def write_svg(path: str | Path, problem: Problem, tendons, title: str = "") -> P
              f"<title>{name}: {len(tendons)} tendon(s), millimetres</title>",
              f'<path id="body" d="{_body_path(f, problem)}" fill="#f4f4f4" fill-rule="evenodd" '
              f'stroke="#444" stroke-width="0.3"/>']
+    exits = problem.exits
+    if exits is not None:
+        d = " ".join(f"M {f.text(a)} L {f.text(b)}" for a, b in exits.segments)
+        lines.append(f'<path id="exits" class="exit-set" d="{d}" stroke="#2a2" stroke-width="1.2" fill="none">'
+                     f"<desc>where a tendon may leave the body ({exits.kind})</desc></path>")
     for i, t in enumerate(tendons):
         c = COLORS[i % len(COLORS)]
         ax, ay = f.xy(t.anchor)
         px, py = f.xy(t.pull_end)
+        out = []
+        if getattr(t, "exit", None) is not None:  # on out of the body, along the route's last direction
+            way = t.waypoints[-1] - t.waypoints[-2]
+            tip = t.waypoints[-1] + 0.04 * problem.size * way / max(float(np.linalg.norm(way)), 1e-300)
+            out = [f'<path class="exit" d="M {f.text(t.waypoints[-1])} L {f.text(tip)}" stroke-dasharray="1 0.6"/>']
         pull = "" if t.contraction is None else f", pull {1e3 * t.contraction:.2f} mm"
         lines += [f'<g id="tendon{i + 1}" stroke="{c}" fill="none" stroke-width="0.8">',
                   f"<desc>tendon {i + 1}: {1e3 * t.length:.1f} mm{pull}; circle: anchor, square: pull end</desc>",
@@ -81,7 +93,7 @@ def write_svg(path: str | Path, problem: Problem, tendons, title: str = "") -> P
                   f'<circle class="anchor" cx="{ax:.3f}" cy="{ay:.3f}" r="1.2" fill="{c}"/>',
                   f'<rect class="pull-end" x="{px - 1.2:.3f}" y="{py - 1.2:.3f}" width="2.4" height="2.4" fill="{c}"/>',
                   f'<text x="{ax:.3f}" y="{ay - 2:.3f}" font-size="3" fill="{c}" stroke="none">{i + 1}</text>',
-                  "</g>"]
+                  *out, "</g>"]
     lines.append("</svg>")
     with atomic_path(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")

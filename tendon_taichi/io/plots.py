@@ -357,14 +357,19 @@ def _frame(ax, problem: Problem, x, title: str, pose: Problem | None = None) -> 
     ax.set_yticks([])
 
 
-def _routes(ax, paths: list[np.ndarray]) -> None:
-    """Each path (k, 2) in its colour, its anchor a circle, its pull end a square."""
+def _routes(ax, paths: list[np.ndarray], leaves: list[bool] | None = None, size: float = 0.0) -> None:
+    """Each path (k, 2) in its colour, its anchor a circle, its pull end a square;
+    one that ``leaves`` the body there, with a dashed line out of it (``size`` x 0.06 long)."""
     colors = palette()
     for i, w in enumerate(paths):
         c = colors[i % len(colors)]
         ax.plot(w[:, 0], w[:, 1], color=c, lw=2.2, solid_capstyle="round")
         ax.plot(*w[0], "o", color=c, ms=5)
         ax.plot(*w[-1], "s", color=c, ms=5)
+        if leaves is not None and leaves[i]:
+            way = w[-1] - w[-2]
+            tip = w[-1] + 0.06 * size * way / max(float(np.linalg.norm(way)), 1e-300)
+            ax.plot([w[-1][0], tip[0]], [w[-1][1], tip[1]], "--", color=c, lw=1.4)
         ax.annotate(str(i + 1), w[0], textcoords="offset points", xytext=(3, 3), fontsize=8, color=c)
 
 
@@ -380,15 +385,22 @@ def design_figure(problem: Problem, tendons, real, title: str):
     poses = [real] if real.poses is None else real.poses
     fig = new_figure(figsize=(4.4 * (1 + len(poses)), 4.4))
     axes = fig.subplots(1, 1 + len(poses), squeeze=False)[0]
-    _frame(axes[0], problem, None, f"{len(tendons)} route(s) at rest\n(circle: anchor, square: pull end)")
-    _routes(axes[0], [t.waypoints for t in tendons])
+    exits = problem.exits
+    where = "" if exits is None else f"; green: where they may leave, {exits.kind}"
+    _frame(axes[0], problem, None, f"{len(tendons)} route(s) at rest\n(circle: anchor, square: pull end{where})")
+    if exits is not None:
+        for a, b in exits.segments:
+            axes[0].plot([a[0], b[0]], [a[1], b[1]], color="tab:green", lw=4, alpha=0.5, solid_capstyle="butt")
+    leaves = [getattr(t, "exit", None) is not None for t in tendons]
+    _routes(axes[0], [t.waypoints for t in tendons], leaves, problem.size)
     T = problem.mesh.triangles
     names = problem.pose_names
     for i, (ax, r) in enumerate(zip(axes[1:], poses)):
         label = f" '{names[i]}'" if len(poses) > 1 else ""
         _frame(ax, problem, r.x, f"as built{label}: pose error {100 * r.pose_error_rel:.2f}% of L\n"
                                  f"(blue: targets, green: goals)", problem.pose(i))
-        _routes(ax, [problem.embed_waypoints(t.nodes, t.waypoints).positions(T, r.x) for t in tendons])
+        _routes(ax, [problem.embed_waypoints(t.nodes, t.waypoints).positions(T, r.x) for t in tendons], leaves,
+                problem.size)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return fig

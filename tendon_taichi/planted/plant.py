@@ -22,8 +22,8 @@ import numpy as np
 
 from ..body.cables import CableSet
 from ..body.problem import Problem, build_problem
-from ..body.scene import Scene, load_scene, parse_scene
-from ..errors import ConvergenceError, InputError
+from ..body.scene import EXITS, Scene, load_scene, parse_scene
+from ..errors import ConvergenceError, InputError, SceneError
 from ..files import atomic_path, file_stem
 from ..physics.model import Model
 from ..solve.newton import NewtonSolver
@@ -67,10 +67,10 @@ def planted_name(scene: Scene, n_tendons: int, seed: int, poses: int = 1) -> str
     return f"{scene.name}_planted_{n_tendons}t_s{seed}" + (f"_{poses}p" if poses > 1 else "")
 
 
-def _source_command(scene: Scene, n: int, seed: int, level: int, poses: int = 1) -> str:
+def _source_command(scene: Scene, n: int, seed: int, level: int, poses: int = 1, exit: str = "clamp") -> str:
     src = scene.origin[len("builtin:"):] if scene.origin.startswith("builtin:") else scene.origin
     return (f"tendon-taichi planted {src} --tendons {n} --seed {seed} --level {level}"
-            + (f" --poses {poses}" if poses > 1 else ""))
+            + (f" --poses {poses}" if poses > 1 else "") + (f" --exit {exit}" if exit != "clamp" else ""))
 
 
 def _strip_header(text: str) -> str:
@@ -127,14 +127,29 @@ def scene_text(scene: Scene, name: str, goals, header: list[str]) -> str:
     return "".join(f"# {h}".rstrip() + "\n" for h in header) + body
 
 
+def with_exit(text: str, exit: str) -> str:
+    """A scene's TOML ``text`` with ``exit`` in its [tendons] table (the key replaced,
+    added to the table, or the table added)."""
+    line = f'exit = "{exit}"'
+    table = re.search(r"(?m)^\[tendons\]\s*$", text)
+    if table is None:
+        return text.rstrip() + f"\n\n[tendons]\n{line}\n"
+    end = re.search(r"(?m)^\[", text[table.end():])
+    stop = len(text) if end is None else table.end() + end.start()
+    body, n = re.subn(r'(?m)^\s*exit\s*=.*$', line, text[table.end():stop], count=1)
+    if not n:
+        body = "\n" + line + body
+    return text[:table.end()] + body + text[stop:]
+
+
 def _header(scene: Scene, name: str, tendons: list[PlantedTendon], n: int, seed: int, level: int,
-            disp_rel: float, ratios: np.ndarray | None = None) -> list[str]:
+            disp_rel: float, ratios: np.ndarray | None = None, exit: str = "inside") -> list[str]:
     P = 1 if ratios is None else len(ratios)
     rows = [f"Planted from '{scene.name}': its goals are where {n} random tendon"
             f"{'s' if n > 1 else ''} (seed {seed}, level {level}),",
             "contracted and solved as sliding cables, bring the target points"
             + (f" in each of {P} poses" if P > 1 else "") + ". Made by",
-            f"  {_source_command(scene, n, seed, level, P)}",
+            f"  {_source_command(scene, n, seed, level, poses=P, exit=exit)}",
             f"The tendons (waypoints, contractions) are in {name}.json:"]
     for i, t in enumerate(tendons):
         rows.append(f"  {i + 1}: {100 * t.length:.2f} cm, contracted {100 * t.ratio:.2f} % "
@@ -162,7 +177,14 @@ def plant(scene: Scene | str, n_tendons: int, seed: int, level: int = 2,
     ``name``, ``contraction_ratios``, ``tensions``, ``max_target_displacement``,
     ``targets``); its tendons' contraction and tension are those of pose 0.
     A draw whose pose is too small (largest target displacement below
-    ``min_displacement`` L) or whose solve fails is redrawn from the same stream."""
+    ``min_displacement`` L), in which a tendon is slack (the others' pull shortened
+    its path by more than its contraction) or whose solve fails is redrawn from the
+    same stream.
+    The tendons leave the body where ``settings.exit`` says (``[tendons] exit``,
+    written into the scene unless it is "inside"): by default at the clamp, so that
+    the planted answer is buildable and a design of the scene is asked for the same
+    - inside the body where no clamp meets the outline (a body clamped in its
+    middle); the layout's ``exit`` says which (none: inside)."""
     st = settings or PlantSettings()
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
@@ -176,7 +198,17 @@ def plant(scene: Scene | str, n_tendons: int, seed: int, level: int = 2,
     if len(scene.poses) > 1:
         raise InputError(f"{scene.origin}: plant from a one-pose scene (it has {len(scene.poses)} poses)")
     n_tendons, seed, poses = int(n_tendons), int(seed), int(poses)
-    problem = build_problem(scene, level)
+    exit = st.exit
+    if exit not in EXITS:
+        raise InputError(f"the exit must be one of {', '.join(EXITS)} (got {exit!r})")
+    try:
+        problem = build_problem(scene.with_tendons(scene.origin, exit=exit), level)
+    except SceneError:
+        if exit != "clamp" or scene.tendons.exit != "inside":
+            raise
+        exit = "inside"  # no clamp meets the outline: the tendons end inside the body
+        problem = build_problem(scene, level)
+    scene = problem.scene
     region = Region(problem, st)
     walker = Walker(region, st)
     rng = np.random.default_rng(seed)
@@ -198,6 +230,8 @@ def plant(scene: Scene | str, n_tendons: int, seed: int, level: int = 2,
                    for r in (ratios if ratios is not None else [None])]
         except ConvergenceError:
             continue
+        if eqs[0].tau.min() <= 1e-9 * max(float(eqs[0].tau.max()), 1e-300):
+            continue  # a tendon the others left slack does no work: the layout would not be the answer
         pose_goals = [problem.target_positions(eq.x) for eq in eqs]
         pose_disp = [np.linalg.norm(g - rest, axis=1) for g in pose_goals]
         if min(d.max() for d in pose_disp) < st.min_displacement * L:
@@ -209,7 +243,9 @@ def plant(scene: Scene | str, n_tendons: int, seed: int, level: int = 2,
         goals = pose_goals[0]
         name = planted_name(scene, n_tendons, seed, poses)
         text = scene_text(scene, name, pose_goals, _header(scene, name, tendons, n_tendons, seed, level=level,
-                                                           disp_rel=disp.max() / L, ratios=ratios))
+                                                           disp_rel=disp.max() / L, ratios=ratios, exit=exit))
+        if exit != "inside":
+            text = with_exit(text, exit)
         parse_scene(text, origin=name, base_dir=None, default_name=name)  # it must load
         extra = {} if ratios is None else {"poses": [
             {"name": f"pose{q}", "contraction_ratios": ratios[q].tolist(),
@@ -227,7 +263,7 @@ def plant(scene: Scene | str, n_tendons: int, seed: int, level: int = 2,
                      "max_target_displacement_rel": float(disp.max() / L)},
             "targets": [{"point": list(tg.point), "goal": goals[i].tolist(), "displacement": float(disp[i])}
                         for i, tg in enumerate(scene.targets)],
-            "margin": region.margin, "draws": draw, **extra,
+            "margin": region.margin, "draws": draw, **({} if exit == "inside" else {"exit": exit}), **extra,
         }
         return text, layout
     why = ("the drawn tendons never moved the targets by " f"{100 * st.min_displacement:g} % of L"

@@ -3,8 +3,11 @@
 A tendon is the path of a random walk with bounded curvature: its curvature
 drifts (an Ornstein-Uhlenbeck process, mean zero) and is bent away from the
 boundary when a look-ahead arc would come closer than the margin, so paths
-follow the body's limbs instead of bouncing off them. Every draw comes from
-one ``numpy.random.Generator``, so the same stream gives the same tendons.
+follow the body's limbs instead of bouncing off them. Where the scene's
+tendons leave the body (``[tendons] exit``), each walk starts at a random point
+where they may leave, runs straight in and goes on from there; its pull end is
+that point. Every draw comes from one ``numpy.random.Generator``, so the same
+stream gives the same tendons.
 """
 
 from __future__ import annotations
@@ -37,7 +40,8 @@ class PlantSettings:
     itself); ``max_turning`` (rad): its summed turning. ``contraction``: range of the
     contraction ratio c / length. ``min_displacement`` (x L): a draw whose
     largest target displacement is smaller is rejected. ``max_draws``: layouts
-    tried before giving up; ``walk_tries``: walks per tendon and draw.
+    tried before giving up; ``walk_tries``: walks per tendon and draw. ``exit``:
+    where the tendons leave the body (a scene's ``[tendons] exit``).
     """
 
     min_length: float = 0.25
@@ -52,6 +56,7 @@ class PlantSettings:
     min_displacement: float = 0.02
     max_draws: int = 200
     walk_tries: int = 25
+    exit: str = "clamp"
 
 
 @dataclass
@@ -70,6 +75,10 @@ class PlantedTendon:
         return {"waypoints": self.waypoints.tolist(), "length": self.length,
                 "contraction": self.contraction, "contraction_ratio": self.ratio,
                 "tension": self.tension}
+
+
+#: how far inside the outline a planted tendon's exit lies (m): its waypoints are rounded to 1 um
+INSET = 1.5e-6
 
 
 # ------------------------------------------------------------------ geometry
@@ -95,6 +104,10 @@ class Region:
         self.spacing = problem.fibers.spacing
         self.margin = st.margin * self.spacing
         self.clamped = cKDTree(problem.mesh.nodes[problem.fixed])
+        #: where the tendons leave the body (None: their pull ends stay inside), and how far each
+        #: runs straight in from there before its walk starts (the walls are not held along it)
+        self.exits = problem.exits
+        self.lead = 0.0 if self.exits is None else 1.5 * max(self.exits.zone, 1.1 * self.margin)
         #: how far the anchor must be from the clamps: anchor_distance L, or half
         #: the farthest any point is (a body clamped in its middle), m
         reach = float(self.clamp_distance(problem.mesh.nodes).max())
@@ -219,11 +232,42 @@ class Walker:
             out.append(p)
         return out
 
+    def from_exit(self, rng: np.random.Generator, others, sep: float) -> np.ndarray | None:
+        """The samples (k, 2) of one walk that starts where the body's exit set lets a
+        tendon leave: from a random point of it, straight in for ``lead`` m, then on
+        as a walk; None when it is too short or its run in crosses another tendon."""
+        st, h = self.st, self.step
+        seg = self.r.exits.segments
+        lengths = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)
+        k = rng.choice(len(seg), p=lengths / lengths.sum()) if lengths.sum() > 0 else 0
+        a, b = seg[k]
+        p0 = a + rng.uniform() * (b - a)
+        along = (b - a) / max(float(np.linalg.norm(b - a)), 1e-300)
+        inward = np.array([-along[1], along[0]])
+        if not self.r.inside((p0 + 1e-3 * self.r.L * inward)[None])[0]:
+            inward = -inward
+        p0 = p0 + INSET * inward  # the waypoints are rounded to 1 um: the exit stays in the body
+        lead = p0 + self.step * np.arange(1, int(math.ceil(self.r.lead / self.step)) + 1)[:, None] * inward
+        if len(others[0]) and distance_to_segments(lead, *others).min() < sep:
+            return None
+        if not self._free(lead[-1:], others, sep)[0]:
+            return None
+        target = rng.uniform(st.min_length, st.max_length) * self.r.L
+        theta = float(np.arctan2(inward[1], inward[0]))
+        state = {"offset": 0.0, "lo": theta, "hi": theta, "turning": 0.0}
+        fwd = self._extend(rng, lead[-1], theta, target - self.r.lead, others, sep=sep, state=state)
+        if h * len(fwd) + self.r.lead < st.min_length * self.r.L - 1e-12:
+            return None
+        return np.vstack([p0, lead, *fwd])
+
     def walk(self, rng: np.random.Generator, others, sep: float) -> np.ndarray | None:
         """The samples (k, 2) of one walk (spacing ``step``), or None when it is too
         short. It runs forward from a random start and, if it gets stuck before its
-        drawn length, on backwards from the start."""
+        drawn length, on backwards from the start; where tendons leave the body, from
+        the exit set (:meth:`from_exit`)."""
         st, h = self.st, self.step
+        if self.r.exits is not None:
+            return self.from_exit(rng, others, sep)
         p = self.start(rng, others, sep)
         if p is None:
             return None
@@ -249,10 +293,12 @@ def _waypoints(samples: np.ndarray, every: int = 2) -> np.ndarray:
 
 
 def _tendon_ok(path: np.ndarray, region: Region, others, sep: float, st: PlantSettings) -> bool:
-    """The final checks on a rounded path: inside with the margin, apart from the
-    others, anchor away from the clamps, no kink."""
+    """The final checks on a rounded path: inside with the margin (but on its run in
+    from where it leaves the body), apart from the others, anchor away from the
+    clamps, no kink."""
     dense = _polyline_samples(path, 0.25 * region.margin)
-    if not region.inside(dense[:1])[0] or region.clearance(dense).min() < region.margin:
+    held = np.linalg.norm(dense - path[-1], axis=1) >= region.lead if region.exits is not None else slice(None)
+    if not region.inside(dense[:1])[0] or region.clearance(dense[held]).min() < region.margin:
         return False
     if len(others[0]) and distance_to_segments(dense, *others).min() < 0.9 * sep:
         return False
@@ -279,9 +325,10 @@ def _draw_tendon(rng: np.random.Generator, walker: Walker, placed: list[np.ndarr
         samples = walker.walk(rng, others, sep)
         if samples is None:
             continue
-        # the anchor is the end farther from the clamps; the pulled end the nearer
+        # the anchor is the end farther from the clamps (or from where it leaves the body);
+        # the pulled end the nearer
         d = region.clamp_distance(samples[[0, -1]])
-        if d[1] > d[0]:
+        if region.exits is not None or d[1] > d[0]:
             samples = samples[::-1]
         path = _waypoints(samples)
         if _tendon_ok(path, region, others, sep, st):
