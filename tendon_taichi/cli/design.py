@@ -36,7 +36,8 @@ def table(summary: dict) -> list[str]:
     level = summary["resolution"]
     out = [f"{summary['scene']} level {level} (L = {100 * summary['body_size']:.2f} cm, friction "
            f"{summary['friction']:g}, clearance {summary['clearance']:g} L, budget {100 * summary['budget']:g}% of L"
-           + (f", min capstan {summary['min_capstan']:g}" if summary.get("min_capstan") else "") + ")",
+           + (f", min capstan {summary['min_capstan']:g}" if summary.get("min_capstan") else "")
+           + (f", tendons leave at the {summary['exit']}" if summary.get("exit", "inside") != "inside" else "") + ")",
            "the front (per tendon count, the best layout found; * the recommended design):",
            f"{'tendons':>7} {'as built':>9} {f'level {level}':>9} {'capstan':>7} {'kinks':>5} {'length':>8}  from"]
     if fine is not None:
@@ -60,8 +61,9 @@ def table(summary: dict) -> list[str]:
                    "--min-capstan: the limit was set aside)")
     for i, t in enumerate(rec["tendons"]):
         pulls = ", ".join(f"{1e3 * c:.2f}" for c in t["contraction"])
+        leaves = "" if t.get("exit") is None else ", leaves at ({:.1f}, {:.1f}) mm".format(*(1e3 * np.array(t["exit"])))
         out.append(f"  tendon {i + 1}: {100 * t['length']:.1f} cm, pull {pulls} mm, tension {t['tension']:.3f} N, "
-                   f"turning {np.degrees(t['turning']):.0f} deg, capstan {t['capstan']:.3f}")
+                   f"turning {np.degrees(t['turning']):.0f} deg, capstan {t['capstan']:.3f}{leaves}")
     out.append("files: " + ", ".join(summary["files"].values()))
     return out
 

@@ -140,7 +140,8 @@ class Layout:
 @dataclass
 class Consolidation:
     """The consolidated ``layout`` (routes and their as-built robot), the ``steps``
-    taken from the ``extracted_count`` tendons whose fitted routes had the as-built
+    taken from the ``extracted_count`` tendons (``strands`` routes once the pieces
+    of one strand were merged) whose fitted routes had the as-built
     pose error ``extracted_pose_error_rel``, and per count the layout it passed
     through (``front``); ``evaluations`` candidate layouts were solved in full, of
     which ``unsolved`` could not be (an equilibrium did not converge) and were
@@ -151,6 +152,7 @@ class Consolidation:
     extracted_count: int
     extracted_pose_error_rel: float
     steps: list[Step] = field(default_factory=list)
+    strands: int | None = None  # routes left once the pieces of one strand were merged (:func:`merge_pieces`)
     front: dict[int, Layout] = field(default_factory=dict)
     evaluations: int = 0
     unsolved: int = 0
@@ -179,7 +181,7 @@ class Consolidation:
                        route_evaluations=0, route_s=0.0)
 
     def as_json(self) -> dict:
-        return {"extracted_count": self.extracted_count,
+        return {"extracted_count": self.extracted_count, "strands": self.strands,
                 "extracted_realizable_pose_error_rel": self.extracted_pose_error_rel,
                 "steps": [s.as_json() for s in self.steps], "evaluations": self.evaluations,
                 "unsolved": self.unsolved, "screened": self.screened,
@@ -545,7 +547,7 @@ def consolidate(context: Context, tendons: list[Tendon], options: ConsolidationS
     first = search.solve(routes, search.start_ratios(routes, tensions))
     if first is None:
         raise ConvergenceError(f"the as-built robot of {source or 'the'} tendons cannot be solved")
-    out = Consolidation(first, len(tendons), first.error)
+    out = Consolidation(first, len(tendons), first.error, strands=len(routes))
     search.out = out
     out.front[first.count] = first
     if not options.enabled:
