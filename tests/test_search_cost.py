@@ -60,6 +60,13 @@ def test_the_pieces_of_one_strand_merge_into_one_route(finger, n):
     assert 0.3 <= tensions[0, 0] <= 0.3 + 0.01 * (n - 1)
 
 
+def test_no_route_or_one_is_left_as_it_is(finger):
+    h = finger.scene.tendons.clearance * finger.size
+    assert merge_pieces([], np.zeros((1, 0)), finger, h)[0] == []
+    one = [fit_route(np.array([[0.02, 0.01], [0.05, 0.01]]), finger.size)]
+    assert merge_pieces(one, np.ones((1, 1)), finger, h)[0] == one
+
+
 def test_strands_side_by_side_or_across_are_not_merged(finger):
     h = finger.scene.tendons.clearance * finger.size
     two = [fit_route(p, finger.size) for y in (0.006, 0.014) for p in _pieces(y, 3)]

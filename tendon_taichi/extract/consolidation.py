@@ -481,6 +481,8 @@ def merge_pieces(routes: list[Route], tensions: np.ndarray, problem: Problem,
     fibers thin out hands the search fewer, longer routes. A merge that would keep
     less clearance than its pieces is not made; the merged tension is the
     length-weighted mean."""
+    if len(routes) < 2:
+        return list(routes), tensions
     routes, tensions = list(routes), np.array(tensions, dtype=float).reshape(-1, len(routes))
     gap = MERGE_GAP * problem.size
     merged = True
