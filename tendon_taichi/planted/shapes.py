@@ -33,8 +33,10 @@ SHAPES = ("star", "hook", "tapered", "wavy", "notched", "neck")
 EXTENT = (0.07, 0.12)
 #: the built-in scenes' fiber spacing and triangle area at level 1 for a body of REFERENCE size L (m)
 SPACING, AREA, REFERENCE = 0.005, 8.0e-6, 0.11
-#: the clamp holds at least this much of the outline (x the body's extent)
-CLAMPED = 0.12
+#: the clamp holds at least this much of the outline (x the body's extent): the planted tendons
+#: leave the body there, each a channel apart, clear of the clamp's corners (0.12 left no room
+#: for three in most bodies)
+CLAMPED = 0.25
 #: holes keep this far from the outline and from each other (x the body's extent)
 HOLE_MARGIN = 0.06
 #: targets lie this far inside the outline (x the body's extent)
