@@ -311,6 +311,7 @@ class Pool:
         if self._executor is None:
             return
         processes = list((getattr(self._executor, "_processes", None) or {}).values())
+        manager = getattr(self._executor, "_executor_manager_thread", None)
         self._executor.shutdown(wait=False, cancel_futures=True)
         self._executor = None
         if terminate:
@@ -318,6 +319,8 @@ class Pool:
                 p.terminate()
             for p in processes:  # one still setting up cleans up first (_start)
                 p.join(CLEAN_UP_S)
+            if manager is not None:  # its pipe closed before the interpreter's exit wakes it (Python 3.11
+                manager.join(CLEAN_UP_S)  # otherwise races it: "Exception ignored ... Bad file descriptor")
 
     def __enter__(self) -> "Pool":
         return self
