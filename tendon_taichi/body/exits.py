@@ -50,9 +50,6 @@ class ExitSet:
         q = np.arange(len(p))
         return foot[q, k], d[q, k], k
 
-    def as_json(self) -> dict:
-        return {"kind": self.kind, "segments": self.segments.tolist(), "zone": self.zone}
-
 
 class ExitWalls:
     """The walls as a route leaving through ``exit`` (dim,) sees them: within ``zone``

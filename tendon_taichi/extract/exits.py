@@ -65,7 +65,8 @@ def exit_run(problem: Problem, start: np.ndarray, clearance: float) -> tuple[np.
         return straight, int(seg[0])
     ids = np.flatnonzero(keep)
     first = ids[np.argsort(np.linalg.norm(nodes[ids] - start, axis=1))[:8]]
-    first = [i for i in first if _clear(np.array([nodes[i], start]), problem, clearance)] or [first[0]]
+    held = clearance * (1.0 - CLEAR_TOL)
+    first = [i for i in first if problem.walls.polyline_distance(np.array([start, nodes[i]])) >= held] or [first[0]]
     dist, pred, source = dijkstra(_node_graph(problem, keep), indices=first, min_only=True,
                                   return_predecessors=True)
     dist = dist + np.linalg.norm(nodes - start, axis=1)[np.maximum(source, 0)]
