@@ -195,6 +195,14 @@ def test_a_recommendation_outside_the_budget_comes_with_a_warning():
     assert _budget_warning(summary) == []
 
 
+def test_outside_the_budget_a_tendon_that_buys_only_rounding_is_not_recommended():
+    rows = [{"count": k, "realizable_pose_error_rel": e, "capstan_worst": 0.85, "total_length": 0.1 * k}
+            for k, e in ((1, 0.00970543489401192), (2, 0.009705434894011909), (3, 0.0097054348940119))]
+    assert recommend(rows, 0.005)["count"] == 1  # a slack second tendon, equal to the last bits
+    rows[1]["realizable_pose_error_rel"] = 0.009
+    assert recommend(rows, 0.005)["count"] == 2
+
+
 def test_a_capstan_limit_takes_the_fewest_tendons_that_keep_it():
     """--min-capstan: within the budget, the fewest tendons whose worst capstan keeps
     the limit; when no layout within the budget keeps it, the rule without it."""

@@ -29,7 +29,7 @@ from ..extract.clearance import CLEAR_TOL
 from ..extract.consolidation import Layout
 from ..extract.context import Context
 from ..extract.converge import FineSolves, converge_front
-from ..extract.front import Front, search_front
+from ..extract.front import PRECISION, Front, search_front
 from ..extract.metrics import MetricSettings, tendon_metrics
 from ..extract.realizable import as_built_arrays
 from ..extract.settings import ConsolidationSettings, FrontSettings
@@ -96,7 +96,8 @@ def recommend(rows: list[dict], budget: float, max_tendons: int | None = None, m
     ``budget`` (fraction of L) and whose worst capstan factor is at least
     ``min_capstan`` (the pull that reaches a tendon's far end, a fraction), the best
     worst capstan among them, then the shortest; when none keeps the capstan limit,
-    the same without it; when none is within the budget, the lowest as-built error."""
+    the same without it; when none is within the budget, the lowest as-built error
+    (the fewest tendons among those within the soft IK's precision of it)."""
     pool = [e for e in rows if max_tendons is None or e["count"] <= max_tendons]
     if not pool:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)")
@@ -104,7 +105,9 @@ def recommend(rows: list[dict], budget: float, max_tendons: int | None = None, m
     kept = [e for e in within if e["capstan_worst"] >= min_capstan] or within
     if kept:
         return min(kept, key=lambda e: (e["count"], -e["capstan_worst"], e["total_length"]))
-    return min(pool, key=lambda e: (e["realizable_pose_error_rel"], e["count"]))
+    least = min(e["realizable_pose_error_rel"] for e in pool)  # a tendon more that buys only rounding is none
+    return min([e for e in pool if e["realizable_pose_error_rel"] <= least + PRECISION],
+               key=lambda e: (e["count"], e["realizable_pose_error_rel"]))
 
 
 def tendon_rows(layout: Layout, mu: float, clearances: list[float], scene: Scene) -> list[dict]:
