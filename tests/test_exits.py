@@ -60,6 +60,14 @@ def test_the_exit_key_defaults_to_inside_and_bad_values_are_one_line():
     assert build_problem(parse_scene(away.format(exit="inside", holes="")), 1).exits is None
 
 
+def test_a_clamp_exit_where_no_clamp_meets_the_outline_is_one_line_and_writes_nothing(cli, tmp_path):
+    r = cli("design", "cross", "--exit", "clamp", "--out", "out", "--quiet", cwd=tmp_path)  # clamped in its middle
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.strip().splitlines() == [
+        'tendon-taichi: error: builtin:cross: tendons.exit = "clamp" but no [[fixed]] box meets the outline']
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_the_clamps_exit_set_is_its_stretch_of_the_outline_clear_of_the_corners():
     p = _plate()
     ex = p.exits

@@ -93,6 +93,11 @@ def polygons_overlap(outline: np.ndarray, holes) -> str | None:
     return None
 
 
+def outline_meets_box(outline: np.ndarray, lo, hi) -> bool:
+    """Whether a closed outline (k, 2) crosses or touches the box with corners ``lo``, ``hi``."""
+    return bool(shapely.LinearRing(np.asarray(outline, dtype=float)).intersects(shapely.box(*lo, *hi)))
+
+
 def segments(a: np.ndarray, b: np.ndarray):
     """The segments a[j] -> b[j] (e, 2) as one shapely geometry (for distances)."""
     return shapely.multilinestrings(np.stack([a, b], axis=1))

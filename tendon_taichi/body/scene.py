@@ -46,8 +46,8 @@ import numpy as np
 from ..errors import SceneError
 from ..objective.settings import Homotopy, OptimizeSettings, read_optimize
 from ..tables import TableReader, as_point
-from .geometry import (MIN_WIDTH_RATIO, normalize_polygon, polygon_self_intersects, polygon_too_thin,
-                       polygons_overlap)
+from .geometry import (MIN_WIDTH_RATIO, normalize_polygon, outline_meets_box, polygon_self_intersects,
+                       polygon_too_thin, polygons_overlap)
 
 
 @dataclass(frozen=True)
@@ -211,7 +211,9 @@ class Scene:
     def with_tendons(self, origin: str = "command line", **changes) -> "Scene":
         """A copy with some [tendons] settings replaced (None values ignored), checked."""
         changes = {k: v for k, v in changes.items() if v is not None}
-        return replace(self, tendons=replace(self.tendons, **changes).checked(origin)) if changes else self
+        if not changes:
+            return self
+        return _clamp_checked(replace(self, tendons=replace(self.tendons, **changes).checked(origin)))
 
 
 # --------------------------------------------------------------------------- parsing
@@ -343,7 +345,19 @@ def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None
                                     "optimize", origin), fibers)
     tendons = _read_tendons(TableReader(doc.raw("tendons") if doc.has("tendons") else {}, "tendons", origin))
     doc.finish()
-    return Scene(name, body, fibers, tuple(fixed), poses, optimize=opt, source=text, origin=origin, tendons=tendons)
+    return _clamp_checked(Scene(name, body, fibers, tuple(fixed), poses, optimize=opt, source=text, origin=origin,
+                                tendons=tendons))
+
+
+def _clamp_checked(scene: Scene) -> Scene:
+    """The scene, or a SceneError where its tendons must leave at the clamp and no
+    [[fixed]] box meets its outline (known before a mesh: an outline body's)."""
+    body = scene.body
+    if scene.tendons.exit != "clamp" or body.outline is None or body.dim != 2:
+        return scene
+    if any(outline_meets_box(body.outline, box.lo, box.hi) for box in scene.fixed):
+        return scene
+    raise SceneError(f"{scene.origin}: tendons.exit = \"clamp\" but no [[fixed]] box meets the outline")
 
 
 def _read_targets(holder: TableReader, where: str) -> tuple[Target, ...]:
