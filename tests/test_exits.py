@@ -24,6 +24,7 @@ from tendon_taichi.extract.clearance import route_walls
 from tendon_taichi.extract.exits import exit_route
 from tendon_taichi.extract.routes import fit_route
 from tendon_taichi.extract.routing import RouteObjective, RouteSettings
+from tendon_taichi.planted.plant import with_exit
 
 PLATE = """
 name = "plate"
@@ -66,6 +67,17 @@ def test_a_clamp_exit_where_no_clamp_meets_the_outline_is_one_line_and_writes_no
     assert r.stderr.strip().splitlines() == [
         'tendon-taichi: error: builtin:cross: tendons.exit = "clamp" but no [[fixed]] box meets the outline']
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("tendons", ["", "[tendons]\nfriction = 0.2\n", "[tendons]\nexit = \"surface\"\nfriction = 0.2\n"])
+def test_a_planted_scene_gets_its_exit_in_its_tendons_table(tendons):
+    base = PLATE.replace('[tendons]\nexit = "{exit}"\n', "").format(holes="")
+    text = with_exit(base + tendons + "[optimize]\nhomotopy = { k0 = 1.0 }\n", "clamp")
+    scene = parse_scene(text)
+    assert scene.tendons.exit == "clamp" and scene.optimize.homotopy.k0 == 1.0
+    assert text.count("[tendons]") == 1 and text.count("exit =") == 1
+    if "friction" in tendons:
+        assert scene.tendons.friction == 0.2
 
 
 def test_the_clamps_exit_set_is_its_stretch_of_the_outline_clear_of_the_corners():

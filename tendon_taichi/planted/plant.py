@@ -136,7 +136,7 @@ def with_exit(text: str, exit: str) -> str:
         return text.rstrip() + f"\n\n[tendons]\n{line}\n"
     end = re.search(r"(?m)^\[", text[table.end():])
     stop = len(text) if end is None else table.end() + end.start()
-    body, n = re.subn(r'(?m)^\s*exit\s*=.*$', line, text[table.end():stop], count=1)
+    body, n = re.subn(r'(?m)^[ \t]*exit[ \t]*=.*$', line, text[table.end():stop], count=1)
     if not n:
         body = "\n" + line + body
     return text[:table.end()] + body + text[stop:]
