@@ -76,3 +76,35 @@ def objective_fd(ik, r, d, h=1e-6):
         ik._last = None
         vals.append(ik.evaluate(r + sgn * h * d)[0])
     return (vals[0] - vals[1]) / (2 * h)
+
+
+def as_built_residual(a) -> float:
+    """From an as-built export alone (``as_built.npz``, pose 0): checks that each
+    tendon's segment tensions fall from its pull end by ``exp(-mu Theta_s)``
+    (Theta_s the turning between segment s and the pull end, at the exported
+    positions) and that the last one is the tendon's exported tension; returns the
+    largest force (the body's elastic forces, reference Neo-Hookean, and the
+    segments' pulls on their end points) on a free node over the largest tension."""
+    X, T, fixed, x = a["nodes"], a["triangles"], a["fixed"].astype(bool), a["x"][0]
+    f = body_forces(X, T, x, float(a["youngs_modulus"]), float(a["poisson_ratio"]), float(a["thickness"]))
+    start, tri, bary = a["tendon_start"], a["point_tri"], a["point_bary"]
+    points = np.einsum("kj,kjd->kd", bary, x[T[tri]])
+    seg_t, mu = a["segment_tension"][0], float(a["friction"])
+    s = 0
+    for t in range(len(start) - 1):
+        w = points[start[t]:start[t + 1]]
+        d = np.diff(w, axis=0)
+        n = d / np.linalg.norm(d, axis=1, keepdims=True)
+        tens = seg_t[s:s + len(d)]
+        turn = np.abs(np.arctan2(d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0], (d[:-1] * d[1:]).sum(1)))
+        theta = np.r_[np.cumsum(turn[::-1])[::-1], 0.0]  # turning from each segment to the pull end
+        assert abs(tens[-1] - a["tension"][0, t]) <= 1e-12 * max(abs(tens[-1]), 1e-300)
+        assert np.allclose(tens, tens[-1] * np.exp(-mu * theta), rtol=1e-9)
+        for i, ni in enumerate(n):  # segment i pulls its ends together
+            for point, sign in ((start[t] + i + 1, 1.0), (start[t] + i, -1.0)):
+                for k in range(3):
+                    f[T[tri[point], k]] += sign * bary[point, k] * tens[i] * ni
+        s += len(d)
+    scale = np.abs(seg_t).max()
+    assert scale > 0
+    return float(np.abs(f[~fixed]).max() / scale)
