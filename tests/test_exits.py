@@ -68,7 +68,8 @@ def test_a_clamp_exit_where_no_clamp_meets_the_outline_is_one_line_and_writes_no
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("tendons", ["", "[tendons]\nfriction = 0.2\n", "[tendons]\nexit = \"surface\"\nfriction = 0.2\n"])
+@pytest.mark.parametrize("tendons", ["", "[tendons]\nfriction = 0.2\n",
+                                     "[tendons]\nexit = \"surface\"\nfriction = 0.2\n"])
 def test_a_planted_scene_gets_its_exit_in_its_tendons_table(tendons):
     base = PLATE.replace('[tendons]\nexit = "{exit}"\n', "").format(holes="")
     text = with_exit(base + tendons + "[optimize]\nhomotopy = { k0 = 1.0 }\n", "clamp")

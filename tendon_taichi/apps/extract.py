@@ -212,7 +212,8 @@ def _scored(name: str, problem: Problem, state: IdealizedState, cons: Consolidat
     if real.poses is not None:
         metrics["realizable_pose_errors_rel"] = [r.pose_error_rel for r in real.poses]
     dt = time.perf_counter() - t0
-    if cons.strands is not None and cons.strands < cons.extracted_count:  # said here too: a worker process that merged them cannot
+    # said here too: a worker process that merged them has no log
+    if cons.strands is not None and cons.strands < cons.extracted_count:
         say(f"{name}: its {cons.extracted_count} tendons are {cons.strands} strands (pieces in line merged)")
     say(f"{name}: {len(tendons)} tendon(s), as built {100 * real.pose_error_rel:.2f}% of L ({dt:.1f} s)")
     return ExtractorResult(name, tendons, metrics, real, dt, pose_names=problem.pose_names, consolidation=cons)

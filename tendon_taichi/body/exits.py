@@ -117,6 +117,13 @@ class ExitWalls:
         return out
 
 
+def beyond(points: np.ndarray, length: float) -> np.ndarray:
+    """The point (dim,) ``length`` (m) past a polyline's (k, dim) last point, along its
+    last segment: where a drawing shows a tendon running on out of the body."""
+    way = points[-1] - points[-2]
+    return points[-1] + length * way / max(float(np.linalg.norm(way)), 1e-300)
+
+
 def _pieces(line: np.ndarray) -> list[np.ndarray]:
     """A polyline (k, 2) cut at its corners (turns above CORNER)."""
     d = np.diff(line, axis=0)

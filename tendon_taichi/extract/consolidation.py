@@ -426,17 +426,25 @@ def smooth_joins(a: Route, b: Route, problem: Problem, reach: float, clearance: 
     ends are within ``reach`` (m) and that keeps the ``clearance`` (m; as much of it
     as the one of them that keeps less, where one is flagged); where routes leave
     the body, of their cores, carried out of the body again (:func:`~.exits.exit_route`)."""
-    out = []
+    def near(a2: Route, b2: Route) -> bool:
+        return np.linalg.norm(a2.control[-1] - b2.control[0]) <= reach
+
+    return list(_joined(a, b, problem, clearance, near))
+
+
+def _joined(a: Route, b: Route, problem: Problem, clearance: float, joinable: Callable[[Route, Route], bool]):
+    """The smooth joins of ``a`` and ``b`` (their cores) in each end-to-end orientation
+    ``joinable(a2, b2)`` allows (``a2`` ends at the joint, ``b2`` starts there), made
+    as :func:`smooth_joins` says, one at a time: those that keep as much clearance as
+    the one of ``a`` and ``b`` that keeps less."""
     least = min(held_clearance(a, clearance), held_clearance(b, clearance))
     a, b = a.inner(), b.inner()  # routes that leave the body are joined without their runs out
-    for a2 in (a, a.reversed()):  # a2 ends at the joint
-        for b2 in (b, b.reversed()):  # b2 starts there
-            if np.linalg.norm(a2.control[-1] - b2.control[0]) > reach:
-                continue
-            joined = exit_route(join_routes(a2, b2, problem.size), problem, clearance)
-            if keeps_as_much(joined, least, clearance):
-                out.append(joined)
-    return out
+    for a2 in (a, a.reversed()):
+        for b2 in (b, b.reversed()):
+            if joinable(a2, b2):
+                joined = exit_route(join_routes(a2, b2, problem.size), problem, clearance)
+                if keeps_as_much(joined, least, clearance):
+                    yield joined
 
 
 def end_distances(routes: list[Route]) -> np.ndarray:
@@ -484,29 +492,26 @@ def merge_pieces(routes: list[Route], tensions: np.ndarray, problem: Problem,
     if len(routes) < 2:
         return list(routes), tensions
     routes, tensions = list(routes), np.array(tensions, dtype=float).reshape(-1, len(routes))
-    gap = MERGE_GAP * problem.size
-    merged = True
-    while merged and len(routes) > 1:
-        merged = False
-        for i, j in partner_pairs(routes):
-            a, b = routes[i].inner(), routes[j].inner()
-            for a2, b2 in ((a, b), (a, b.reversed()), (a.reversed(), b), (a.reversed(), b.reversed())):
-                if not _in_line(a2, b2, gap):
-                    continue
-                least = min(held_clearance(routes[i], clearance), held_clearance(routes[j], clearance))
-                one = exit_route(join_routes(a2, b2, problem.size), problem, clearance)
-                if not keeps_as_much(one, least, clearance):
-                    continue
-                w = a.length / max(a.length + b.length, 1e-300)
-                t = w * tensions[:, i] + (1 - w) * tensions[:, j]
-                keep = [k for k in range(len(routes)) if k not in (i, j)]
-                routes = [routes[k] for k in keep] + [replace(one, source=routes[i].source or routes[j].source)]
-                tensions = np.concatenate([tensions[:, keep], t[:, None]], axis=1)
-                merged = True
-                break
-            if merged:
-                break
+    while (found := _first_merge(routes, problem, clearance)) is not None:
+        i, j, one = found
+        a, b = routes[i].inner(), routes[j].inner()
+        w = a.length / max(a.length + b.length, 1e-300)
+        merged = w * tensions[:, i] + (1 - w) * tensions[:, j]
+        keep = [k for k in range(len(routes)) if k not in (i, j)]
+        routes = [routes[k] for k in keep] + [replace(one, source=routes[i].source or routes[j].source)]
+        tensions = np.concatenate([tensions[:, keep], merged[:, None]], axis=1)
     return routes, tensions
+
+
+def _first_merge(routes: list[Route], problem: Problem, clearance: float) -> tuple[int, int, Route] | None:
+    """The first two partner routes (:func:`partner_pairs`) that are pieces of one
+    strand (:func:`_in_line`), and the route they make; None where no two are."""
+    gap = MERGE_GAP * problem.size
+    for i, j in partner_pairs(routes):
+        one = next(_joined(routes[i], routes[j], problem, clearance, lambda a2, b2: _in_line(a2, b2, gap)), None)
+        if one is not None:
+            return i, j, one
+    return None
 
 
 def positions(real: RealizableResult) -> list[np.ndarray]:

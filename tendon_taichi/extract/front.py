@@ -19,8 +19,9 @@ tendons together:
   alone and every smooth join of two partners (each route with its
   ``JOIN_PARTNERS`` nearest; k = 1), every set of k pooled routes (k > 1; from a
   pool of more than ``PAIR_POOL``, the pairs among the routes the screen ranks
-  best alone and each with the best, :func:`_pairs`) are screened from the best
-  layout of the count above and the best solved in full; the ``beam`` best of them and the one of least pose error
+  best alone and each with the best, :func:`~.pooled.screened_pairs`) are
+  screened from the best layout of the count above and the best solved in
+  full; the ``beam`` best of them and the one of least pose error
   join the beam's layouts of that count (beside them: the beam's path is the
   same with or without them). Which few routes a small layout keeps matters
   most, and where the beam's path from the most tendons leads depends on the

@@ -29,20 +29,27 @@ def pooled_candidates(search: _Search, pool: list[Route], k: int,
     within the search's gap ('join'), for k > 1 each set of k pooled routes ('set'),
     or those ``among`` (index tuples) where given; each to start from the
     contractions that give its routes their strands' tensions in every pose."""
-    P = search.problem.n_poses
-
-    def cand(action: str, ids: tuple[int, ...], routes: list[Route]) -> Candidate:
-        tensions = np.tile([r.tension for r in routes], (P, 1))
-        return Candidate(action, ids, routes, search.start_ratios(routes, tensions))
-
     if k > 1:
         sets = combinations(range(len(pool)), k) if among is None else among
-        return [cand("set", ids, [pool[i] for i in ids]) for ids in sets]
+        return [_candidate(search, "set", ids, [pool[i] for i in ids]) for ids in sets]
     reach, clearance = search.options.gap * search.problem.size, search.rs.clearance
-    out = [cand("route", (i,), [r]) for i, r in enumerate(pool)]
+    out = _singles(search, pool)
     for i, j in partner_pairs(pool):
-        out += [cand("join", (i, j), [joined]) for joined in search.joins(pool[i], pool[j], reach, clearance)]
+        out += [_candidate(search, "join", (i, j), [joined])
+                for joined in search.joins(pool[i], pool[j], reach, clearance)]
     return out
+
+
+def _candidate(search: _Search, action: str, ids: tuple[int, ...], routes: list[Route]) -> Candidate:
+    """A pooled layout to start from the contractions that give its routes their
+    strands' tensions in every pose."""
+    tensions = np.tile([r.tension for r in routes], (search.problem.n_poses, 1))
+    return Candidate(action, ids, routes, search.start_ratios(routes, tensions))
+
+
+def _singles(search: _Search, pool: list[Route]) -> list[Candidate]:
+    """Each pooled route alone ('route'), in pool order."""
+    return [_candidate(search, "route", (i,), [r]) for i, r in enumerate(pool)]
 
 
 def screened_pairs(search: _Search, pool: list[Route], near: Layout) -> list[tuple[int, int]] | None:
@@ -52,8 +59,7 @@ def screened_pairs(search: _Search, pool: list[Route], near: Layout) -> list[tup
     them; None (every pair) for a smaller pool."""
     if len(pool) <= PAIR_POOL:
         return None
-    singles = pooled_candidates(search, pool, 1)[:len(pool)]  # each route alone, in pool order
-    found = search.predicted(singles, near)
+    found = search.predicted(_singles(search, pool), near)
     costs = np.array([np.inf if cost is None else cost for cost, _ in found])
     order = [int(i) for i in np.argsort(costs, kind="stable")]
     best = order[:PAIR_POOL]

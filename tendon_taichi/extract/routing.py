@@ -193,8 +193,8 @@ class RouteObjective:
         n = sum(self.sizes)
         fs = self.problem.scene.fibers
         r = self.problem.n_poses * len(self.routes)
-        low, high = np.r_[np.tile(lo, n), np.full(r, -fs.max_payout)], np.r_[np.tile(hi, n),
-                                                                                np.full(r, STROKE * fs.max_contraction)]
+        low = np.r_[np.tile(lo, n), np.full(r, -fs.max_payout)]
+        high = np.r_[np.tile(hi, n), np.full(r, STROKE * fs.max_contraction)]
         for last, route in zip(np.cumsum(self.sizes) - 1, self.routes):
             if route.exits:
                 low[2 * last:2 * last + 2] = route.exit.min(axis=0) / self.L

@@ -13,6 +13,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
+from ..body.exits import beyond
 from ..body.problem import Problem
 from ..body.spline import bezier_pieces
 from ..files import atomic_path
@@ -83,9 +84,8 @@ def write_svg(path: str | Path, problem: Problem, tendons, title: str = "") -> P
         px, py = f.xy(t.pull_end)
         out = []
         if getattr(t, "exit", None) is not None:  # on out of the body, along the route's last direction
-            way = t.waypoints[-1] - t.waypoints[-2]
-            tip = t.waypoints[-1] + 0.04 * problem.size * way / max(float(np.linalg.norm(way)), 1e-300)
-            out = [f'<path class="exit" d="M {f.text(t.waypoints[-1])} L {f.text(tip)}" stroke-dasharray="1 0.6"/>']
+            tip = f.text(beyond(t.waypoints, 0.04 * problem.size))
+            out = [f'<path class="exit" d="M {f.text(t.waypoints[-1])} L {tip}" stroke-dasharray="1 0.6"/>']
         pull = "" if t.contraction is None else f", pull {1e3 * t.contraction:.2f} mm"
         lines += [f'<g id="tendon{i + 1}" stroke="{c}" fill="none" stroke-width="0.8">',
                   f"<desc>tendon {i + 1}: {1e3 * t.length:.1f} mm{pull}; circle: anchor, square: pull end</desc>",

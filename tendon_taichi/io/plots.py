@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..body.exits import beyond
 from ..body.problem import Problem
 from ..files import atomic_path
 from ..version import provenance
@@ -367,8 +368,7 @@ def _routes(ax, paths: list[np.ndarray], leaves: list[bool] | None = None, size:
         ax.plot(*w[0], "o", color=c, ms=5)
         ax.plot(*w[-1], "s", color=c, ms=5)
         if leaves is not None and leaves[i]:
-            way = w[-1] - w[-2]
-            tip = w[-1] + 0.06 * size * way / max(float(np.linalg.norm(way)), 1e-300)
+            tip = beyond(w, 0.06 * size)
             ax.plot([w[-1][0], tip[0]], [w[-1][1], tip[1]], "--", color=c, lw=1.4)
         ax.annotate(str(i + 1), w[0], textcoords="offset points", xytext=(3, 3), fontsize=8, color=c)
 

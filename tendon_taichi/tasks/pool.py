@@ -98,7 +98,8 @@ def _start(setup: Callable[..., Any] | None, args: tuple, blas: int | None = Non
     """A worker's start: Ctrl-C is for the process that runs the job (it stops the
     workers), the worker ends with that process (:func:`_end_with_parent`), its
     BLAS thread pools are sized as the job process's (``blas``), then ``setup``,
-    during which SIGTERM (:meth:`Pool.close`, :func:`_end_with_parent`) raises ``SystemExit`` so that ``setup`` cleans up; a set-up that fails or is
+    during which SIGTERM (:meth:`Pool.close`, :func:`_end_with_parent`) raises
+    ``SystemExit`` so that ``setup`` cleans up; a set-up that fails or is
     stopped ends the worker quietly (the pool breaks, and the job goes on in its
     own process)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
