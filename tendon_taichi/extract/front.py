@@ -27,9 +27,11 @@ tendons together:
   most, and where the beam's path from the most tendons leads depends on the
   lattice;
 * **finish**: up to the first count within the budget, every layout kept of
-  that count (the beam's and the exhaustive search's) is oriented and its
-  routes optimized (control points, ends and contractions; ``refine`` rounds),
-  and the least costly is the count's; above it, only the best, one round;
+  that count (the beam's and the exhaustive search's) is oriented and screened
+  by one short round of route optimization (control points, ends and
+  contractions; ``EXTEND_SCREEN`` SLSQP iterations), the ``FINISH_BEST`` least
+  costly are finished (``refine`` rounds more), and the least costly of those
+  is the count's (:func:`_finish_best`); above it, only the best, one round;
 * **monotone**: where a count's layout has a larger as-built error than the one
   below (by more than the soft IK's precision, ``PRECISION``), the smaller
   layout with one more pooled route added is solved and kept when it does
@@ -123,8 +125,12 @@ SLACK = 1e-6
 #: the extension tries each route end carried on straight by this much (x L, :func:`_extensions`)
 EXTEND = 0.1
 #: SLSQP iterations of the one round of route optimization that screens each extension
-#: (:func:`_screened`); only the best screened extension of a layout is finished
+#: (:func:`_screened`) and each of a count's layouts before the finish (:func:`_finish_best`);
+#: only the best screened extension of a layout is finished
 EXTEND_SCREEN = 15
+#: of a count's layouts up to the first count within the budget, the least costly this many
+#: after the screen (:func:`_finish_best`) are finished
+FINISH_BEST = 2
 
 
 @dataclass(frozen=True)
@@ -148,7 +154,8 @@ class Front:
     finer mesh optimized again (:func:`~.converge.converge_front`); ``slack``: each
     time a layout's slack routes were left out and the rest replaced the front's
     layout of their count (``count`` before, ``kept`` after, ``error`` as built);
-    ``on_finished``,
+    ``left``: the counts the beam searched above the front's last (one above the
+    first within the budget), left out unfinished; ``on_finished``,
     while :func:`search_front` runs, is called with each distinct layout as it
     joins ``finished``."""
 
@@ -165,6 +172,7 @@ class Front:
     priors: int = 0
     refit: list[int] = field(default_factory=list)
     slack: list[dict] = field(default_factory=list)
+    left: list[int] = field(default_factory=list)
     on_finished: Callable[[Layout], None] | None = field(default=None, repr=False, compare=False)
 
     def offer(self, layouts: list[Layout], size: float) -> None:
@@ -180,7 +188,7 @@ class Front:
         return {"counts": sorted(self.layouts), "seeds": self.seeds, "priors": self.priors, "pool": self.pool,
                 "evaluations": self.evaluations, "screened": self.screened,
                 "route_evaluations": self.route_evaluations, "route_s": self.route_s, "time_s": self.time_s,
-                "refit": list(self.refit), "slack": list(self.slack)}
+                "refit": list(self.refit), "slack": list(self.slack), "left": list(self.left)}
 
 
 def search_front(context: Context, consolidations: list[Consolidation], options: ConsolidationSettings,
@@ -242,25 +250,20 @@ def search_front(context: Context, consolidations: list[Consolidation], options:
         kept = {_key(lay, size) for lay in by_count.get(k, [])}
         by_count[k] = by_count.get(k, []) + [lay for lay in found if _key(lay, size) not in kept]
     counts = [k for k in sorted(by_count) if by_count[k] and (max_tendons is None or k <= max_tendons)]
-    within = False
-    ahead: dict[int, Layout] = {}  # counts above the first within the budget, finished at once
-    for i, k in enumerate(counts):
+    horizon = None  # the count above the first within the budget: the most tendons the front finishes
+    for k in counts:
+        if horizon is not None and k > horizon:
+            front.left = [j for j in counts if j > horizon]
+            first = min(j for j, m in front.layouts.items() if m.error <= options.budget)
+            say(f"front: {_counts(front.left)} left out (a {first}-tendon layout is within the budget)")
+            break
         # up to the first count within the budget, every layout the beam kept (and the exhaustive
-        # search found) is finished - route optimization can reorder them: a join often gains
-        # most; above it, the best, one round - those of every count above at once (they do not
-        # depend on each other, and once a count is within the budget one stays within it)
-        if within and not ahead:
-            rest = counts[i:]
-            say(f"front: optimizing the routes of the best {rest[0]}{f'- to {rest[-1]}' if rest[1:] else ''}"
-                f"-tendon layout{'s' if rest[1:] else ''}")
-            ahead = dict(zip(rest, _finish_all(search, [_best(by_count[j], 1, size)[0] for j in rest], 1)))
-        if k in ahead:
-            done = [ahead[k]]
-        else:
-            members = by_count[k]
-            say(f"front: optimizing the routes of the {'best' if len(members) == 1 else len(members)} "
-                f"{k}-tendon layout{'s' if len(members) > 1 else ''}")
-            done = _finish_all(search, members, options.refine)
+        # search found) is screened and the best finished - route optimization can reorder them:
+        # a join often gains most; the count above it, its best, one round
+        members = by_count[k] if horizon is None else _best(by_count[k], 1, size)
+        say(f"front: optimizing the routes of the {'best' if len(members) == 1 else len(members)} "
+            f"{k}-tendon layout{'s' if len(members) > 1 else ''}")
+        done = _finish_best(search, members, options.refine if horizon is None else 1)
         lay = min(done, key=lambda m: m.cost)
         if k > 1 and k - 1 in front.layouts and lay.error > front.layouts[k - 1].error + PRECISION:
             lay = _one_more(search, front.layouts[k - 1], pool, lay, size)
@@ -274,13 +277,19 @@ def search_front(context: Context, consolidations: list[Consolidation], options:
                     f"{smaller.count}-tendon layout of {100 * smaller.error:.2f}% of L")
                 front.layouts[smaller.count] = smaller
                 front.slack.append({"count": lay.count, "kept": smaller.count, "error": smaller.error})
-        within = any(m.error <= options.budget for m in front.layouts.values())
+        if horizon is None and any(m.error <= options.budget for m in front.layouts.values()):
+            horizon = k + 1
     _extend(search, front, pool, size, options)
     _descend(search, front, pool, size, say)
     front.evaluations, front.screened = tally.evaluations, tally.screened
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
     front.time_s, front.on_finished = time.perf_counter() - t0, None
     return front
+
+
+def _counts(counts: list[int]) -> str:
+    """``counts`` (ascending, consecutive) in words: "the 4-tendon layouts", "the 4- to 6-tendon layouts"."""
+    return f"the {counts[0]}-{f' to {counts[-1]}-' if counts[1:] else ''}tendon layouts"
 
 
 def slack_routes(layout: Layout) -> list[int]:
@@ -327,6 +336,40 @@ def _finish_task(spec: tuple, job: tuple[Layout, int]) -> tuple[Layout, dict]:
 def _finish_all(search: _Search, layouts: list[Layout], rounds: int) -> list[Layout]:
     """Each of ``layouts`` finished (:func:`_finished`), on the search's workers too."""
     return search.each(partial(_finished, search), _finish_task, [(m, rounds) for m in layouts])
+
+
+def _finish_best(search: _Search, layouts: list[Layout], rounds: int) -> list[Layout]:
+    """The ``FINISH_BEST`` least costly of ``layouts`` after a screen, finished: each
+    oriented and its routes optimized one round of at most ``EXTEND_SCREEN`` SLSQP
+    iterations (:func:`_screened_layout`), the least costly then ``rounds`` rounds
+    more (:func:`_continued`); with at most ``FINISH_BEST`` layouts, each finished
+    (:func:`_finished`), and with ``rounds`` 0 (no route optimization: nothing to
+    screen by), each oriented. Route optimization reorders a count's layouts - a join
+    often gains most -, but after a short round mostly as it will after the finish (so
+    it does for the extensions, ``benchmarks/extension_screen.py``); on the search's
+    workers too."""
+    if len(layouts) <= FINISH_BEST or not rounds:
+        return _finish_all(search, layouts, rounds)
+    screened = search.each(partial(_screened_layout, search), _screen_layout_task, [(m,) for m in layouts])
+    best = sorted(screened, key=lambda lay: lay.cost)[:FINISH_BEST]
+    todo = [(lay, rounds) for lay in best if not lay.optimized]
+    done = iter(search.each(partial(_continued, search), _continue_task, todo))
+    return [lay if lay.optimized else next(done) for lay in best]
+
+
+def _screened_layout(search: _Search, layout: Layout) -> Layout:
+    """A solved ``layout`` oriented and its routes optimized one round of at most
+    ``EXTEND_SCREEN`` SLSQP iterations (not yet finished); one already finished as it is."""
+    if layout.optimized:
+        return layout
+    done = search.finish(layout, rounds=1, iterations=EXTEND_SCREEN)[0]
+    return replace(done, source=sources(layout.routes), optimized=False)
+
+
+def _screen_layout_task(spec: tuple, job: tuple[Layout]) -> tuple[Layout, dict]:
+    """:func:`_screened_layout` as a worker runs it."""
+    search = _Search.again(spec, job[0])
+    return _screened_layout(search, *job), search.tally()
 
 
 def _pooled(search: _Search, consolidations: list[Consolidation], size: float) -> Layout | None:
