@@ -420,3 +420,10 @@ def test_make_results_takes_generated_cases(tmp_path, monkeypatch):
     assert sorted(p.name for p in folder.iterdir()) == ["gen001_hook_planted_1t_s1.json",
                                                         "gen001_hook_planted_1t_s1.toml"]
     assert make_results.suite_folder(argparse.Namespace(generated=None, seed=0, runs=tmp_path)) == make_results.SUITE
+    # drawn once: a second run with the same cases reuses them, as they are
+    toml = folder / "gen001_hook_planted_1t_s1.toml"
+    toml.write_text(toml.read_text() + "# kept\n")
+    assert make_results.suite_folder(argparse.Namespace(generated=1, seed=1, runs=tmp_path)) == folder
+    assert toml.read_text().endswith("# kept\n")
+    make_results.copy_cases(folder, tmp_path / "out")
+    assert sorted(p.name for p in (tmp_path / "out" / "cases").iterdir()) == sorted(p.name for p in folder.iterdir())

@@ -19,8 +19,9 @@ compared as `planted-bench --levels` compares them, and the commit that made
 them. The default run (levels 1-3, 16 cases) takes about an hour on 2 cores.
 With ``--generated N`` the suite is N generated cases from seed S (default 0;
 ``planted-bench --generated``: bodies nobody tuned for), written into
-RUNS/generated/ first; benchmarks/generated_results/ holds
-``--generated 60 --levels 2 --out benchmarks/generated_results``.
+RUNS/generated/ first (kept there: a later run with the same N and S reuses
+them) and copied into DIR/cases/; benchmarks/generated_results/ holds
+``--generated 60 --levels 1 2 --out benchmarks/generated_results``.
 """
 
 import argparse
@@ -164,11 +165,27 @@ def _setting(item: str):
 
 def suite_folder(args) -> Path:
     """The suite to run: benchmarks/planted, or with ``--generated N`` that many
-    generated cases from ``--seed``, written into RUNS/generated/."""
+    generated cases from ``--seed``, written into RUNS/generated/ - unless that
+    folder already holds exactly those cases (one scene per seed: drawing a body
+    takes up to minutes; delete the folder to draw them again)."""
     if args.generated is None:
         return SUITE
-    return generate_suite(args.generated, args.seed, args.runs / "generated",
+    folder = args.runs / "generated"
+    seeds = {f"gen{s:03d}" for s in range(args.seed, args.seed + args.generated)}
+    held = [f.name.split("_")[0] for f in folder.glob("gen*.toml")] if folder.is_dir() else []
+    if sorted(held) == sorted(seeds):
+        print(f"the {args.generated} generated cases in {folder}", file=sys.stderr, flush=True)
+        return folder
+    return generate_suite(args.generated, args.seed, folder,
                           say=lambda text: print(text, file=sys.stderr, flush=True))
+
+
+def copy_cases(suite: Path, out: Path) -> None:
+    """The generated ``suite``'s scenes and planted layouts (NAME.toml, NAME.json)
+    copied into OUT/cases/ (the results are then read beside what they were run on)."""
+    (out / "cases").mkdir(parents=True, exist_ok=True)
+    for f in sorted(suite.glob("gen*.*")):
+        shutil.copyfile(f, out / "cases" / f.name)
 
 
 def main(argv=None) -> int:
@@ -204,6 +221,8 @@ def main(argv=None) -> int:
     compared = {**compare_levels({r["level"]: r for r in runs}), "coarse_to_fine": not args.independent_levels}
     fronts_figure(compared).savefig(args.out / "fronts.png", dpi=90)
     generated = None if args.generated is None else (args.generated, args.seed)
+    if generated is not None:
+        copy_cases(suite, args.out)
     (args.out / "README.md").write_text(page(runs, compared, generated))
     print(f"wrote {args.out}/", file=sys.stderr)
     return 0

@@ -53,7 +53,7 @@ tendons together:
   extension mostly costs more than the layout; after a short one, the order of
   the extensions is mostly that of their finished costs
   (``benchmarks/extension_screen.py``);
-* **descent** (:func:`_descend`): from the most tendons down, each count's
+* **descent** (:func:`_descend`): from the front's most tendons down, each count's
   finished layout is reduced by every drop and smooth join (screened, the best
   solved in full); where the least costly reduction, as it is, already costs
   less than the layout held for the count below, it is finished (one round)
