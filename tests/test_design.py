@@ -378,6 +378,73 @@ def test_a_design_searches_from_a_prior_designs_front(designed, tmp_path):
     assert first["search"]["priors"] == 0 and first["search"]["routes_from"] is None
 
 
+def test_above_level_1_a_design_searches_from_the_level_belows_front(designed, tmp_path):
+    """At level 2 the design first designs the scene at level 1 (said on stderr) and
+    that front's layouts join the seeds (``search.coarse``, ``search.priors``); the
+    coarser design's recording goes into a temporary folder, removed: nothing else
+    is written. A level-1 design has none."""
+    import os
+
+    from conftest import run_cli
+
+    d, _ = designed
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    r = run_cli("design", d / "finger.toml", "--level", 2, "--out", "two", "--stage-iterations", "25", "--k-min",
+                "0.1", "--extractors", "strands", "--refine", "1", "--no-png", "--no-converge", cwd=tmp_path,
+                env={**os.environ, "TMPDIR": str(tmp)})
+    assert r.returncode == 0, r.stderr
+    two = json.loads((tmp_path / "two" / "design.json").read_text())
+    coarse = two["search"]["coarse"]
+    assert coarse["level"] == 1 and coarse["layouts"] >= 1 and 1 <= coarse["count"] <= coarse["layouts"]
+    assert 0 < coarse["time_s"] == two["timing"]["coarse_s"] < two["time_s"]
+    assert 1 <= two["search"]["priors"] <= coarse["layouts"] and two["search"]["routes_from"] is None
+    assert "small finger at level 1 first" in r.stderr
+    assert f"{two['search']['priors']} of the {coarse['layouts']} layouts of the level-1 design join" in r.stderr
+    assert r.stderr.index("at level 1 first") < r.stderr.index("optimizing small finger at level 2")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tmp", "two"] and list(tmp.iterdir()) == []
+    assert sorted(p.name for p in (tmp_path / "two").iterdir()) == [
+        "as_built.npz", "design.json", "design.svg", "run.npz", "run.rrd"]
+    one = json.loads((d / "out" / "design.json").read_text())
+    assert one["search"]["coarse"] is None and one["timing"]["coarse_s"] is None
+
+
+def test_no_coarse_skips_the_coarser_level(monkeypatch, tmp_path):
+    """``--no-coarse`` reaches the front's settings; with it, as at level 1, a design
+    optimizes at its own level straight away (each design stopped there)."""
+    import argparse
+
+    from tendon_taichi.apps import design as design_module
+    from tendon_taichi.apps.settings import DesignSettings
+    from tendon_taichi.body.scene import load_scene
+    from tendon_taichi.cli.tendons import add_front_flags, front_settings
+    from tendon_taichi.extract.settings import FrontSettings
+
+    ap = argparse.ArgumentParser()
+    add_front_flags(ap)
+    assert front_settings(ap.parse_args([]))["coarse"] is True
+    assert front_settings(ap.parse_args(["--no-coarse"]))["coarse"] is False
+
+    class Made(Exception):
+        pass
+
+    def coarse(*args, **kwargs):
+        raise Made("coarse")
+
+    def optimized(*args, **kwargs):
+        raise Made(kwargs["record"])
+
+    monkeypatch.setattr(design_module, "coarse_prior", coarse)
+    monkeypatch.setattr(design_module, "optimize", optimized)
+    scene = load_scene("finger")
+    with pytest.raises(Made, match="coarse"):
+        design_module.design(scene, 2, tmp_path / "a", DesignSettings())
+    with pytest.raises(Made, match="run.rrd"):  # straight to the level-2 optimization
+        design_module.design(scene, 2, tmp_path / "b", DesignSettings(front=FrontSettings(coarse=False)))
+    with pytest.raises(Made, match="run.rrd"):
+        design_module.design(scene, 1, tmp_path / "c", DesignSettings())
+
+
 class _HereAsIfWorkers:
     """Stands in for ``design``'s pool of worker processes: it says it has one, and
     runs every piece here, pickled and unpickled as a worker would get it."""

@@ -119,7 +119,7 @@ def test_planted_bench_command_on_one_case(tmp_path):
     assert "[1/1] snake_planted_1t_s1" in r.stderr
     (case,) = res["cases"]
     assert res["settings"] == {} and res["totals"]["cases"] == 1
-    assert res["front_search"] == {"beam": 3, "converge": True}
+    assert res["front_search"] == {"beam": 3, "converge": True, "coarse": True}
     assert set(case["extractors"]) >= {"strands", "network_discovery", "path_cover"}
     assert case["passed"] and route_rule(case), case
     assert case["count"] <= 2 and case["realizable_pose_error_rel"] <= 0.01 and case["length_ratio"] <= 2.0

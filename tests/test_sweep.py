@@ -96,12 +96,12 @@ def test_expansion_and_ids(tmp_path):
     sweep_file = tmp_path / "two.toml"  # two scenes x two sparsities
     sweep_file.write_text(TINY.replace('scenes = ["finger"]', 'scenes = ["t_shape", "finger"]'))
     sw = load_sweep(sweep_file)
-    assert sw.consolidation == {"refine": 0} and sw.front == {"beam": 1, "converge": False}
+    assert sw.consolidation == {"refine": 0} and sw.front == {"beam": 1, "converge": False, "coarse": True}
     assert len(sw.cases) == 4
     front = TINY[TINY.index("[front]"):]
     plain = parse_sweep(tomllib.loads(TINY.replace(front, "")), "plain.toml")
     default = parse_sweep(tomllib.loads(TINY.replace(front, "[front]\nbeam = 3\nconverge = true\n")), "d.toml")
-    assert plain.front == default.front == {"beam": 3, "converge": True}
+    assert plain.front == default.front == {"beam": 3, "converge": True, "coarse": True}
     assert [c.id for c in plain.cases] == [c.id for c in default.cases]  # the defaults leave the ids as they were
     assert not {c.id for c in plain.cases} & {c.id for c in load_sweep(sweep_file).cases if c.scene.name == "finger"}
     assert [(c.scene.name, c.settings["sparsity"]) for c in sw.cases] == [
@@ -130,6 +130,7 @@ def test_expansion_and_ids(tmp_path):
     ({"scenes": ["t_shape"], "front": {"beam": 0}}, "front.beam must be an integer >= 1"),
     ({"scenes": ["t_shape"], "front": {"beam": 1.5}}, "front.beam must be an integer >= 1"),
     ({"scenes": ["t_shape"], "front": {"converge": "no"}}, "front.converge must be true or false"),
+    ({"scenes": ["t_shape"], "front": {"coarse": 1}}, "front.coarse must be true or false"),
     ({"scenes": ["t_shape"], "front": {"width": 2}}, "unknown front setting 'width'"),
     ({"scenes": ["t_shape"], "front": 3}, "[front] must be a table"),
     ({"scenes": ["t_shape"], "grid": {"friction": [0.1, -0.1]}}, "tendons.friction must be"),

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +43,7 @@ from ..physics import runtime
 from ..tasks.pool import Pool
 from .extract import Extraction, extract, frictionless_error, log_layout
 from .optimize import RunOptions, RunResult, optimize
-from .priors import PriorDesign, prior_layouts, read_prior, route_rows
+from .priors import PriorDesign, front_prior, prior_layouts, read_prior, route_rows
 from .provenance import result_provenance
 from .settings import DesignSettings, ExtractSettings
 
@@ -214,8 +214,16 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, settings
     here = runtime.info()
     threads = design_threads(workers)
     with Pool(workers, start_worker, (here["threads"], here["arch"])) as pool:
+        coarse = None
+        if prior is None and settings.front.coarse and level > 1:
+            progress.message(f"design: {scene.name} at level {level - 1} first: its front's layouts join this "
+                             "design's (--no-coarse skips this)" + (f"; {workers} worker process"
+                                                                    f"{'es' if workers > 1 else ''} starting"
+                                                                    if workers else ""))
+            prior, coarse = coarse_prior(scene, level - 1, settings, progress, pool=pool, threads=threads)
         progress.message(f"design: optimizing {scene.name} at level {level}"
-                         + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)" if workers else ""))
+                         + (f" ({workers} worker process{'es' if workers > 1 else ''} starting)"
+                            if workers and coarse is None else ""))
         run = optimize(scene, level, settings.solver, record=out / "run.rrd", progress=progress,
                        options=RunOptions(export=out / "run.npz", factor_threads=threads))
         check_reach(run, settings.budget)
@@ -225,6 +233,8 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, settings
                                           factor_threads=threads)
         summary["timing"]["optimize_s"] = run.summary["time_s"]
         summary["timing"]["workers"] = workers
+        summary["timing"]["coarse_s"] = None if coarse is None else coarse["time_s"]
+        summary["search"]["coarse"] = coarse
         summary["warnings"] = list(run.warnings) + _budget_warning(summary) + clearance_warnings(summary)
         summary["files"] = _write(out, ex, layout, summary, png=settings.png, pool=pool)
     if pool.broken:
@@ -232,6 +242,38 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, settings
     summary["time_s"] = time.perf_counter() - t0
     write_json(summary, out / "design.json")
     return Design(summary, run, ex, layout)
+
+
+def coarse_prior(scene: Scene, level: int, settings: DesignSettings, progress: Progress, *, pool: Pool,
+                 threads: int) -> tuple[PriorDesign | None, dict]:
+    """``scene`` designed at the coarser ``level`` as ``settings`` say - its front not
+    solved again on a finer mesh (the design this one starts is that mesh), nothing
+    drawn, the run recorded into a temporary folder, removed - on ``pool``, its
+    factorizations on ``threads``: its front as a prior design for the level above
+    (:func:`~.priors.front_prior`), and what it was (``search.coarse`` in
+    ``design.json``: ``level``, ``layouts``, the ``count`` it recommended, its
+    ``error`` as built, ``time_s``). Where that level reaches no design (its goals
+    out of the budget's reach, no extractor's tendons) the prior is None and
+    ``error`` says why, the design above goes on without it."""
+    t0 = time.perf_counter()
+    quick = replace(settings, png=False, front=replace(settings.front, converge=False, coarse=False))
+    with tempfile.TemporaryDirectory(prefix="tendon-taichi-coarse-") as tmp:
+        try:
+            run = optimize(scene, level, settings.solver, record=Path(tmp) / "run.rrd", progress=progress,
+                           options=RunOptions(export=Path(tmp) / "run.npz", factor_threads=threads))
+            check_reach(run, settings.budget)
+            _, _, summary = recommended(run.held, quick, progress, workers=pool, factor_threads=threads)
+        except InputError as exc:
+            why = str(exc).split("; the run is kept in")[0]  # the temporary recording is gone
+            progress.message(f"design: level {level}: {why}; going on without its layouts")
+            return None, {"level": level, "layouts": 0, "count": None, "error_rel": None,
+                          "time_s": time.perf_counter() - t0, "error": why}
+    prior = front_prior(summary["front"], scene, level)
+    rec = summary["recommended"]
+    progress.message(f"design: level {level}: {len(prior.layouts)} front layouts, {rec['count']} tendon(s) "
+                     f"recommended, {100 * rec['metrics']['realizable_pose_error_rel']:.2f}% of L as built")
+    return prior, {"level": level, "layouts": len(prior.layouts), "count": rec["count"],
+                   "error_rel": rec["metrics"]["realizable_pose_error_rel"], "time_s": time.perf_counter() - t0}
 
 
 def design_threads(workers: int) -> int:
@@ -303,7 +345,7 @@ def recommended(recording: str | Path | RecordedRun, settings: DesignSettings = 
     priors = None
     if prior is not None:
         priors = prior_layouts(prior, problem)
-        log(f"{len(priors)} of the {len(prior.layouts)} layouts of '{prior.path}' join the front's seeds")
+        log(f"{len(priors)} of the {len(prior.layouts)} layouts of {prior.name} join the front's seeds")
     finer = FinerMesh(problem, ex.run.settings, solver, workers) if converge else None
     front = search_front(Context(problem, ex.state, ex.run.settings, solver, log=log, workers=workers), done, cons,
                          settings.front, priors=priors,
@@ -317,7 +359,7 @@ def recommended(recording: str | Path | RecordedRun, settings: DesignSettings = 
     layout = front.layouts[chosen["count"]]
     summary = _summary(ex, layout, chosen, rows, settings, ms=ms)
     summary["search"] = {**front.as_json(), "beam": settings.front.beam,
-                         "routes_from": None if prior is None else str(prior.path),
+                         "routes_from": None if prior is None or prior.path is None else str(prior.path),
                          "converged_resolution": None if fine is None else fine["resolution"],
                          **({"converge_error": fine["error"]} if fine and fine.get("error") else {})}
     summary["timing"].update(extract_s=extract_s, front_s=front.time_s,

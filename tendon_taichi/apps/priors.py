@@ -52,12 +52,27 @@ def route_rows(layout: Layout) -> list[dict]:
 
 @dataclass(frozen=True)
 class PriorDesign:
-    """A prior design's front as read from its ``design.json`` (``path``): per
-    front entry with routes, that layout (its routes marked ``prior:``, not yet
-    checked against a mesh's walls)."""
+    """A prior design's front as read from its ``design.json`` (``path``), or as
+    this process designed it at the coarser ``level`` (:func:`front_prior`; ``path``
+    None): per front entry with routes, that layout (its routes marked ``prior:``,
+    not yet checked against a mesh's walls)."""
 
-    path: Path
+    path: Path | None
     layouts: list[PriorLayout]
+    level: int | None = None
+
+    @property
+    def name(self) -> str:
+        """Where the layouts came from, in words."""
+        return f"the level-{self.level} design" if self.path is None else f"'{self.path}'"
+
+
+def front_prior(front: list[dict], scene: Scene, level: int) -> PriorDesign:
+    """The ``front`` of a design of ``scene`` at ``level`` as ``design.json`` lists it
+    (each entry's ``routes``, :func:`route_rows`), held in memory, as a prior design."""
+    rows = [e["routes"] for e in front if e.get("routes")]
+    return PriorDesign(None, [_layout(routes, len(scene.poses), f"the level-{level} design") for routes in rows],
+                       level)
 
 
 def read_prior(path: str | Path, scene: Scene) -> PriorDesign:

@@ -192,8 +192,8 @@ def _consolidation(table, origin: str) -> dict:
 
 
 def _front(table, origin: str) -> dict:
-    """The [front] table (``beam``, an integer >= 1; ``converge``, true or false)
-    over :data:`~tendon_taichi.extract.settings.FRONT_DEFAULTS`, checked."""
+    """The [front] table (``beam``, an integer >= 1; ``converge`` and ``coarse``, true
+    or false) over :data:`~tendon_taichi.extract.settings.FRONT_DEFAULTS`, checked."""
     if not isinstance(table, dict):
         _fail(origin, "[front] must be a table")
     for key, value in table.items():
@@ -201,8 +201,8 @@ def _front(table, origin: str) -> dict:
             _fail(origin, f"unknown front setting '{key}' (known: {', '.join(FRONT_DEFAULTS)})")
         if key == "beam" and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
             _fail(origin, f"front.beam must be an integer >= 1 (got {value!r})")
-        if key == "converge" and not isinstance(value, bool):
-            _fail(origin, f"front.converge must be true or false (got {value!r})")
+        if key in ("converge", "coarse") and not isinstance(value, bool):
+            _fail(origin, f"front.{key} must be true or false (got {value!r})")
     return {**FRONT_DEFAULTS, **table}
 
 

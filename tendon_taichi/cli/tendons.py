@@ -126,21 +126,25 @@ def add_consolidation_flags(p: argparse.ArgumentParser, budget: bool = True) -> 
 
 
 def add_front_flags(p: argparse.ArgumentParser) -> None:
-    """``--beam`` and ``--no-converge``: how wide the count/error front searches, and
-    whether its errors are re-solved (and its routes optimized again) on the next finer mesh."""
+    """``--beam``, ``--no-converge`` and ``--no-coarse``: how wide the count/error front
+    searches, whether its errors are re-solved (and its routes optimized again) on the
+    next finer mesh, and whether a design above level 1 searches from the level below's too."""
     p.add_argument("--beam", type=int, default=BEAM, metavar="B",
                    help=f"layouts kept per tendon count by the front's beam search (default {BEAM})")
     p.add_argument("--no-converge", action="store_true",
                    help="report the front's errors on the design's mesh, not re-solved (and its routes not "
                         "optimized again) on the next finer one")
+    p.add_argument("--no-coarse", action="store_true",
+                   help="above level 1, do not design at the level below first (its front's layouts are "
+                        "otherwise searched from too; a prior design given with --routes-from takes its place)")
 
 
 def front_settings(args) -> dict:
-    """``beam`` and ``converge`` of the command line, validated (fields of
+    """``beam``, ``converge`` and ``coarse`` of the command line, validated (fields of
     :class:`~tendon_taichi.extract.settings.FrontSettings`)."""
     if args.beam < 1:
         raise InputError(f"--beam must be an integer >= 1 (got {args.beam})")
-    return {"beam": args.beam, "converge": not args.no_converge}
+    return {"beam": args.beam, "converge": not args.no_converge, "coarse": not args.no_coarse}
 
 
 def add_tendon_flags(p: argparse.ArgumentParser) -> None:

@@ -15,9 +15,10 @@ REFINE = 2
 SCREEN = 4
 #: layouts kept per tendon count by the count/error front's beam search
 BEAM = 3
-#: the count/error front's settings as ``design`` takes them: ``beam`` (above) and
-#: ``converge``, whether each entry is re-solved on the next finer mesh
-FRONT_DEFAULTS = {"beam": BEAM, "converge": True}
+#: the count/error front's settings as ``design`` takes them: ``beam`` (above),
+#: ``converge``, whether each entry is re-solved on the next finer mesh, and ``coarse``,
+#: whether a design above level 1 searches from the next coarser level's front too
+FRONT_DEFAULTS = {"beam": BEAM, "converge": True, "coarse": True}
 
 
 def front_id(front: dict) -> dict:
@@ -55,11 +56,14 @@ class ConsolidationSettings:
 class FrontSettings:
     """The count/error front's search: ``beam``, the layouts its beam search keeps
     per tendon count; ``converge``, whether each entry is solved again on the next
-    finer mesh; ``max_tendons``, the most tendons a layout may have (None: no limit)."""
+    finer mesh; ``max_tendons``, the most tendons a layout may have (None: no limit);
+    ``coarse``, whether a design above level 1 first designs at the level below and
+    searches from that front's layouts too (where no prior design is given)."""
 
     beam: int = BEAM
     converge: bool = True
     max_tendons: int | None = None
+    coarse: bool = True
 
     def table(self) -> dict:
         """The ``[front]`` table's settings (:data:`FRONT_DEFAULTS`' keys) as a dict."""
