@@ -166,14 +166,22 @@ def test_planted_bench_bad_input_is_one_line(tmp_path, args, message):
 def test_levels_compare_the_recommended_count_and_the_fronts():
     from tendon_taichi.planted.levels import compare_levels, fronts_figure, table
 
-    def case(name, count, errors, planted=0.001):
+    def case(name, count, errors, planted=0.001, tendons=None):
         front = [{"count": k + 1, "realizable_pose_error_rel": e, "source": "strands"} for k, e in enumerate(errors)]
-        return {"case": name, "planted_count": 2, "count": count, "front": front, "planted_as_built_error_rel": planted}
+        return {"case": name, "planted_count": 2, "count": count, "front": front, "planted_as_built_error_rel": planted,
+                "tendons": tendons, "body_size": 0.1}
 
-    runs = {lv: {"cases": [case("a", 2, [0.02, 0.001]), case("b", 2 if lv < 3 else 1, [0.004 * lv, 0.001]),
+    def routes(lv, lift):
+        """Two straight routes (m), the lower one lifted by ``lift``; at level 2 listed the other
+        way round, at level 3 the lower one drawn from its other end."""
+        low, high = [[0.0, lift], [0.05, lift], [0.1, lift]], [[0.0, 0.05], [0.1, 0.05]]
+        return [high, low] if lv == 2 else [low[::-1] if lv == 3 else low, high]
+
+    runs = {lv: {"cases": [case("a", 2, [0.02, 0.001], tendons=routes(lv, 0.001 * lv)),
+                           case("b", 2 if lv < 3 else 1, [0.004 * lv, 0.001]),
                            {"case": "c", "error": "failed"} if lv == 2 else case("c", 1, [0.001]),
                            case("d", 2, [0.007 + 0.003 * lv, 0.002, 0.001][:3 if lv < 3 else 2],
-                                planted=[0.002, 0.006, 0.009][lv - 1])],
+                                planted=[0.002, 0.006, 0.009][lv - 1], tendons=routes(lv, 0.01 * (lv == 3)))],
                  "totals": {"passed": lv}} for lv in (1, 2, 3)}
     res = compare_levels(runs)
     assert res["levels"] == [1, 2, 3] and [c["case"] for c in res["cases"]] == ["a", "b", "d"]  # c failed at level 2
@@ -193,13 +201,19 @@ def test_levels_compare_the_recommended_count_and_the_fronts():
     assert dk["window"] == pytest.approx(0.0075) and dk["agree"] and d["agreement"]["agree"]
     assert d["agreement"]["compared"] == [1, 2] and d["agreement"]["counts"]["3"]["errors"]["3"] is None
     assert res["errors_agree"] == 2
+    # the routes: a's lower one moved 2 mm between levels 1 and 3 (0.02 L; matched whatever the order or the
+    # direction), d's 10 mm (0.1 L); b's count differs
+    assert a["route_shift"] == pytest.approx(0.02) and d["route_shift"] == pytest.approx(0.1)
+    assert b["route_shift"] is None and res["same_routes"] == 1
     text = table(res)
-    assert text[-1] == ("the same recommended count at every level in 2 of 3 cases; the front's errors agree up "
-                        "to planted + 1 tendons in 2 of 3; each level searched on its own")
+    assert text[-1] == ("the same recommended count at every level in 2 of 3 cases, the same routes (moved at "
+                        "most 0.05 L) in 1; the front's errors agree up to planted + 1 tendons in 2 of 3; each "
+                        "level searched on its own")
+    assert text[1].rstrip().endswith("0.020 L") and text[2].rstrip().endswith("-")
     assert table({**res, "coarse_to_fine": True})[-1].endswith(
         "; each level after the first also searched from the one before's designs")
     assert text[2].split()[5:7] == ["no", "differ"] and text[2].split()[7] == "0.800%"
-    assert text[1].split()[1:7] == ["2", "2", "2", "2", "yes", "agree"] and text[3].split()[-1] == "0.700%"
+    assert text[1].split()[1:7] == ["2", "2", "2", "2", "yes", "agree"] and text[3].split()[-3] == "0.700%"
     fig = fronts_figure(res)
     assert len(fig.axes[0].get_lines()) == 3 + 2  # a line per level, the planted count and the budget
     assert fig.axes[1].get_title() == "b (count moves)"

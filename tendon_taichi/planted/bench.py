@@ -200,7 +200,7 @@ def _prior_id(path: Path | None) -> list | None:
 def score_design(summary: dict, planted_count: int, length_ratio: float) -> dict:
     """A case's design figures: the recommended ``count``, where it came from
     (``best``), its as-built error, the frictionless one, worst capstan, kinks,
-    clearance and tendons, the ``front``, each extractor's final figures, and
+    clearance and tendons, the body size L (m), the ``front``, each extractor's final figures, and
     whether the case ``passed`` (route rule aside: :func:`route_rule`)."""
     rec = summary["recommended"]
     m = rec["metrics"]
@@ -211,7 +211,7 @@ def score_design(summary: dict, planted_count: int, length_ratio: float) -> dict
             "realizable_pose_error_rel_frictionless": m["realizable_pose_error_rel_frictionless"],
             "kinks": int(m["kinks"]), "capstan_worst": m["capstan_worst"], "clearance_min": m["clearance_min"],
             "total_length": m["total_length"], "tendons": [t["waypoints"] for t in rec["tendons"]],
-            "front": summary["front"], "extractors": {e["name"]: e for e in summary["extractors"]},
+            "body_size": summary["body_size"], "front": summary["front"], "extractors": {e["name"]: e for e in summary["extractors"]},
             "passed": passed}
 
 

@@ -20,15 +20,27 @@ search to moves with the mesh, and a layout found on a coarser mesh is a
 start the finer one's search may not reach. ``coarse_to_fine=False`` searches
 each level on its own.
 
+**The same routes.** Where the recommended count is the same at every level,
+``route_shift`` is how far the recommended routes moved between levels: each
+route matched with one of the other level's (the matching that moves them
+least), the mean distance between the two curves (resampled at 32 points,
+either way round), the largest over the routes and the pairs of levels, x L.
+Within ``SAME_ROUTES`` (0.05 L) the levels recommend the same design.
+
 Each level runs as :func:`~tendon_taichi.planted.bench.run_suite` into
 ``OUT/level<N>/``; ``OUT/levels.json`` holds the comparison and
 ``OUT/fronts.png`` one panel per case, one front line per level."""
 
 from __future__ import annotations
 
+import itertools
+import json
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
+from ..extract.routes import resample
 from ..files import write_json
 from ..io.plots import new_figure, save_png
 from .bench import SuiteSettings, case_folder, load_suite, run_suite
@@ -39,6 +51,8 @@ AGREE_ABS = 1e-3
 AGREE_REL = 0.25
 #: added to the planted tendons' own spread where that is wider (x L)
 AGREE_SLACK = 5e-4
+#: the recommended routes at several levels are the same design when they moved at most this (x L)
+SAME_ROUTES = 0.05
 
 
 def run_levels(directory: str | Path, levels: list[int], out_dir: str | Path, coarse_to_fine: bool = True,
@@ -87,10 +101,40 @@ def compare_levels(runs: dict[int, dict]) -> dict:
                                            for e in rows[lv][name]["front"]] for lv in levels}})
         cases[-1]["agreement"] = agreement(cases[-1], {str(lv): rows[lv][name].get("planted_as_built_error_rel")
                                                        for lv in levels})
+        cases[-1]["route_shift"] = route_shift([rows[lv][name] for lv in levels])
     budget = (runs[levels[0]].get("consolidation") or {}).get("budget") if levels else None
     return {"levels": levels, "cases": cases, "same_count": sum(c["same_count"] for c in cases),
             "errors_agree": sum(c["agreement"]["agree"] for c in cases),
+            "same_routes": sum(c["route_shift"] is not None and c["route_shift"] <= SAME_ROUTES for c in cases),
             "budget": budget or 0.005, "totals": {str(lv): runs[lv]["totals"] for lv in levels}}
+
+
+def route_shift(rows: list[dict]) -> float | None:
+    """How far a case's recommended routes moved between levels (module docstring),
+    x L, from its row at each level (``tendons``: each route's waypoints (k, 2) m;
+    ``body_size`` m, or - rows written before they held it - read from the
+    ``design.json`` beside the ``recording``); None where the counts differ."""
+    if any(r.get("tendons") is None for r in rows) or len({len(r["tendons"]) for r in rows}) != 1:
+        return None
+    size = next((s for s in map(_body_size, rows) if s), None)
+    curves = [[resample(np.asarray(w, dtype=float), 32)[0] for w in r["tendons"]] for r in rows]
+    shift = 0.0
+    for a, b in itertools.combinations(curves, 2):
+        far = [[min(np.linalg.norm(p - q, axis=1).mean(), np.linalg.norm(p - q[::-1], axis=1).mean()) for q in b]
+               for p in a]
+        shift = max(shift, min((max((far[i][j] for i, j in enumerate(perm)), default=0.0)
+                                for perm in itertools.permutations(range(len(b)))), default=0.0))
+    return None if size is None else shift / size
+
+
+def _body_size(row: dict) -> float | None:
+    """A case row's body size L (m): its own, or its design.json's."""
+    if row.get("body_size"):
+        return float(row["body_size"])
+    try:
+        return float(json.loads((Path(row["recording"]).parent / "design.json").read_text())["body_size"])
+    except (KeyError, TypeError, OSError, ValueError):
+        return None
 
 
 def agreement(case: dict, planted: dict[str, float | None]) -> dict:
@@ -125,7 +169,7 @@ def table(result: dict) -> list[str]:
     and the planted tendons' own spread, % of L)."""
     levels = result["levels"]
     out = [f"{'case':<26} {'planted':>7} " + " ".join(f"{f'level {lv}':>8}" for lv in levels)
-           + "  same  errors  widest spread  planted spread"]
+           + "  same  errors  widest spread  planted spread  routes moved"]
     for c in result["cases"]:
         a = c["agreement"]
         spreads = [a["counts"][str(k)]["spread"] for k in a["compared"]]
@@ -134,13 +178,18 @@ def table(result: dict) -> list[str]:
         out.append(f"{c['case']:<26} {c['planted_count']:>7} "
                    + " ".join(f"{c['counts'][str(lv)]:>8}" for lv in levels)
                    + f"  {'yes' if c['same_count'] else 'no':>4}  {'agree' if a['agree'] else 'differ':>6}"
-                   + f"  {widest:>13}  {planted:>14}")
+                   + f"  {widest:>13}  {planted:>14}  {_moved(c.get('route_shift')):>12}")
     n = len(result["cases"])
-    out.append(f"the same recommended count at every level in {result['same_count']} of {n} cases; the front's "
+    out.append(f"the same recommended count at every level in {result['same_count']} of {n} cases, "
+               f"the same routes (moved at most {SAME_ROUTES:g} L) in {result.get('same_routes', 0)}; the front's "
                f"errors agree up to planted + 1 tendons in {result['errors_agree']} of {n}"
                + ("; each level after the first also searched from the one before's designs"
                   if result.get("coarse_to_fine") else "; each level searched on its own"))
     return out
+
+
+def _moved(shift: float | None) -> str:
+    return "-" if shift is None else f"{shift:.3f} L"
 
 
 def fronts_figure(result: dict, columns: int = 4):
