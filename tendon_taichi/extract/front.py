@@ -31,7 +31,9 @@ tendons together:
   by one short round of route optimization (control points, ends and
   contractions; ``EXTEND_SCREEN`` SLSQP iterations), the ``FINISH_BEST`` least
   costly are finished (``refine`` rounds more), and the least costly of those
-  is the count's (:func:`_finish_best`); above it, only the best, one round;
+  is the count's (:func:`_finish_best`); the count above it, only the best, one
+  round; the counts above that are left out (``Front.left``): the recommendation
+  is decided below them;
 * **monotone**: where a count's layout has a larger as-built error than the one
   below (by more than the soft IK's precision, ``PRECISION``), the smaller
   layout with one more pooled route added is solved and kept when it does
@@ -53,9 +55,9 @@ tendons together:
   extension mostly costs more than the layout; after a short one, the order of
   the extensions is mostly that of their finished costs
   (``benchmarks/extension_screen.py``);
-* **descent** (:func:`_descend`): from the front's most tendons down, each count's
-  finished layout is reduced by every drop and smooth join (screened, the best
-  solved in full); where the least costly reduction, as it is, already costs
+* **descent** (:func:`_descend`): from the front's most tendons down, each
+  count's finished layout is reduced by every drop and smooth join (screened, the
+  best solved in full); where the least costly reduction, as it is, already costs
   less than the layout held for the count below, it is finished (one round)
   and replaces that layout when it still costs less. The beam reduced the
   layouts as extracted, before route optimization moved their routes; a
