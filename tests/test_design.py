@@ -445,6 +445,26 @@ def test_no_coarse_skips_the_coarser_level(monkeypatch, tmp_path):
         design_module.design(scene, 1, tmp_path / "c", DesignSettings())
 
 
+def test_a_coarser_level_out_of_reach_is_said_and_the_design_goes_on(monkeypatch):
+    """Where the level below's fibers come no nearer the goals than the budget, no
+    layout is searched there: no prior, and ``search.coarse`` says why."""
+    from types import SimpleNamespace
+
+    from tendon_taichi.apps import design as design_module
+    from tendon_taichi.apps.settings import DesignSettings
+    from tendon_taichi.body.scene import load_scene
+
+    said = []
+    run = SimpleNamespace(stages=[SimpleNamespace(figures=SimpleNamespace(pose_error_rel=e)) for e in (0.02, 0.008)])
+    monkeypatch.setattr(design_module, "optimize", lambda *args, **kwargs: run)
+    monkeypatch.setattr(design_module, "recommended", lambda *args, **kwargs: pytest.fail("searched"))
+    progress = SimpleNamespace(message=said.append)
+    prior, coarse = design_module.coarse_prior(load_scene("finger"), 1, DesignSettings(budget=0.005), progress,
+                                               pool=None, threads=1)
+    assert prior is None and coarse["level"] == 1 and coarse["layouts"] == 0 and coarse["count"] is None
+    assert "no closer to the goals than 0.80% of L" in coarse["error"] and "going on without" in said[-1]
+
+
 class _HereAsIfWorkers:
     """Stands in for ``design``'s pool of worker processes: it says it has one, and
     runs every piece here, pickled and unpickled as a worker would get it."""

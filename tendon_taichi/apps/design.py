@@ -252,22 +252,26 @@ def coarse_prior(scene: Scene, level: int, settings: DesignSettings, progress: P
     factorizations on ``threads``: its front as a prior design for the level above
     (:func:`~.priors.front_prior`), and what it was (``search.coarse`` in
     ``design.json``: ``level``, ``layouts``, the ``count`` it recommended, its
-    ``error`` as built, ``time_s``). Where that level reaches no design (its goals
-    out of the budget's reach, no extractor's tendons) the prior is None and
-    ``error`` says why, the design above goes on without it."""
+    as-built ``error_rel``, ``time_s``). Where that level reaches no design (its
+    goals out of the budget's reach, :func:`reach`; no extractor's tendons) the
+    prior is None and ``error`` says why, the design above goes on without it."""
     t0 = time.perf_counter()
     quick = replace(settings, png=False, front=replace(settings.front, converge=False, coarse=False))
     with tempfile.TemporaryDirectory(prefix="tendon-taichi-coarse-") as tmp:
-        try:
-            run = optimize(scene, level, settings.solver, record=Path(tmp) / "run.rrd", progress=progress,
-                           options=RunOptions(export=Path(tmp) / "run.npz", factor_threads=threads))
-            check_reach(run, settings.budget)
-            _, _, summary = recommended(run.held, quick, progress, workers=pool, factor_threads=threads)
-        except InputError as exc:
-            why = str(exc).split("; the run is kept in")[0]  # the temporary recording is gone
-            progress.message(f"design: level {level}: {why}; going on without its layouts")
-            return None, {"level": level, "layouts": 0, "count": None, "error_rel": None,
-                          "time_s": time.perf_counter() - t0, "error": why}
+        run = optimize(scene, level, settings.solver, record=Path(tmp) / "run.rrd", progress=progress,
+                       options=RunOptions(export=Path(tmp) / "run.npz", factor_threads=threads))
+        nearest = reach(run)
+        why = (f"the optimized fibers come no closer to the goals than {100 * nearest:.2f}% of L, above the budget"
+               if nearest > settings.budget else None)
+        if why is None:
+            try:
+                _, _, summary = recommended(run.held, quick, progress, workers=pool, factor_threads=threads)
+            except InputError as exc:
+                why = str(exc)
+    if why is not None:
+        progress.message(f"design: level {level}: {why}; going on without its layouts")
+        return None, {"level": level, "layouts": 0, "count": None, "error_rel": None,
+                      "time_s": time.perf_counter() - t0, "error": why}
     prior = front_prior(summary["front"], scene, level)
     rec = summary["recommended"]
     progress.message(f"design: level {level}: {len(prior.layouts)} front layouts, {rec['count']} tendon(s) "
@@ -291,15 +295,21 @@ def check_reach(run: RunResult, budget: float) -> None:
     tendon layout is expected to beat every fiber together, and the search for
     one over the many tendons such fibers make takes many minutes; the run stays
     in its recording, and the message names the budget that designs anyway."""
-    best = min(run.stages, key=lambda st: st.figures.pose_error_rel).figures
-    if best.pose_error_rel <= budget:
+    if reach(run) <= budget:
         return
+    best = min(run.stages, key=lambda st: st.figures.pose_error_rel).figures
     enough = _rounded_up(best.pose_error_rel)
     way_on = f"; a --budget of {enough:g} or more designs anyway" if enough < 1.0 else ""
     raise InputError(f"the goals are out of reach: the optimized fibers come no closer to them than "
                      f"{1e3 * best.pose_error:.2f} mm ({100 * best.pose_error_rel:.2f}% of L), above the budget of "
                      f"{100 * budget:g}% of L, so no layout was searched; the run is kept in "
                      f"{run.recording}{way_on}")
+
+
+def reach(run: RunResult) -> float:
+    """How near the optimized fibers of ``run`` come to the goals: the least pose
+    error (fraction of L) of its stages, stage 0 (every fiber free) included."""
+    return min(st.figures.pose_error_rel for st in run.stages)
 
 
 def _rounded_up(x: float) -> float:
