@@ -465,6 +465,31 @@ def test_a_coarser_level_out_of_reach_is_said_and_the_design_goes_on(monkeypatch
     assert "no closer to the goals than 0.80% of L" in coarse["error"] and "going on without" in said[-1]
 
 
+def test_a_last_stage_that_makes_no_layout_is_followed_by_the_one_before(monkeypatch):
+    """Where the last stage's pattern makes no tendon (here: every extractor failed
+    on it), the stage before is read, and so on down to stage 1, each said."""
+    from types import SimpleNamespace
+
+    from tendon_taichi.apps import design as design_module
+
+    asked, said = [], []
+
+    def extract(recording, how, log, workers):
+        asked.append(how.stage)
+        stage = 3 if how.stage is None else how.stage
+        run = SimpleNamespace(stages=[SimpleNamespace(summary={"active_fibers": 10 - k}) for k in range(4)])
+        return SimpleNamespace(stage=stage, run=run, problem=None, solver="direct",
+                               results=[SimpleNamespace(error="no strand", consolidation=None)])
+
+    monkeypatch.setattr(design_module, "extract", extract)
+    progress = SimpleNamespace(message=said.append)
+    with pytest.raises(design_module.InputError, match="no extractor produced tendons: no strand"):
+        design_module.recommended("run.rrd", progress=progress)
+    assert asked == [None, 2, 1]
+    assert said == ["design: no extractor's tendons make a layout from stage 3 (7 active fibers); reading stage 2",
+                    "design: no extractor's tendons make a layout from stage 2 (8 active fibers); reading stage 1"]
+
+
 class _HereAsIfWorkers:
     """Stands in for ``design``'s pool of worker processes: it says it has one, and
     runs every piece here, pickled and unpickled as a worker would get it."""

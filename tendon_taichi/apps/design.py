@@ -134,6 +134,9 @@ def tendon_rows(layout: Layout, mu: float, clearances: list[float], scene: Scene
     return rows
 
 
+#: the earliest recorded stage ``design`` reads where the later ones' patterns make no layout (stage 0
+#: has every fiber free: hundreds of short tendons)
+MIN_STAGE = 1
 #: the most worker processes ``design`` starts by default: each holds its own copy of the problem
 #: and its compiled kernels, and the front's batches are a few to a few dozen pieces
 MAX_DEFAULT_WORKERS = 4
@@ -323,7 +326,9 @@ def _rounded_up(x: float) -> float:
 def recommended(recording: str | Path | RecordedRun, settings: DesignSettings = DesignSettings(),
                 progress: Progress | None = None, workers: Pool | None = None, prior: PriorDesign | None = None,
                 factor_threads: int | None = None) -> tuple[Extraction, Layout, dict]:
-    """Every extractor of ``settings`` on a recorded run's last stage (``recording``:
+    """Every extractor of ``settings`` on a recorded run's last stage (where its
+    pattern makes no layout - a homotopy that thinned it to a few fibers -, the stage
+    before, and so on down to ``MIN_STAGE``, said in the progress; ``recording``:
     its path, or the run read or held in memory, as :func:`~.extract.extract` takes
     it), consolidated and routed, the count/error front searched from all their
     routes (:func:`search_front`), each front entry solved again on the next finer
@@ -345,21 +350,32 @@ def recommended(recording: str | Path | RecordedRun, settings: DesignSettings = 
     def log(text: str) -> None:
         progress.message(f"design: {text}")
 
-    ex = extract(recording, how, log=log, workers=workers)
-    extract_s = time.perf_counter() - t0
-    problem, solver = ex.problem, ex.solver
-    done = [r.consolidation for r in ex.results if r.error is None and r.consolidation is not None]
+    stage, extract_s = None, 0.0
+    while True:  # the last stage, or - where its pattern makes no layout - the one before, ...
+        t1 = time.perf_counter()
+        ex = extract(recording, replace(how, stage=stage), log=log, workers=workers)
+        extract_s += time.perf_counter() - t1
+        problem, solver = ex.problem, ex.solver
+        done = [r.consolidation for r in ex.results if r.error is None and r.consolidation is not None]
+        front = None
+        if done:
+            priors = None
+            if prior is not None:
+                priors = prior_layouts(prior, problem)
+                log(f"{len(priors)} of the {len(prior.layouts)} layouts of {prior.name} join the front's seeds")
+            finer = FinerMesh(problem, ex.run.settings, solver, workers) if converge else None
+            front = search_front(Context(problem, ex.state, ex.run.settings, solver, log=log, workers=workers),
+                                 done, cons, settings.front, priors=priors,
+                                 on_finished=None if finer is None else finer.offer)
+        if (front is not None and front.layouts) or max_tendons or ex.stage <= MIN_STAGE:
+            break
+        kept = ex.run.stages[ex.stage].summary.get("active_fibers")
+        log(f"no extractor's tendons make a layout from stage {ex.stage}"
+            + ("" if kept is None else f" ({kept} active fibers)") + f"; reading stage {ex.stage - 1}")
+        stage = ex.stage - 1
     if not done:
         raise InputError("no extractor produced tendons: " + "; ".join(r.error for r in ex.results if r.error))
     ms = MetricSettings(mu=problem.scene.tendons.friction)
-    priors = None
-    if prior is not None:
-        priors = prior_layouts(prior, problem)
-        log(f"{len(priors)} of the {len(prior.layouts)} layouts of {prior.name} join the front's seeds")
-    finer = FinerMesh(problem, ex.run.settings, solver, workers) if converge else None
-    front = search_front(Context(problem, ex.state, ex.run.settings, solver, log=log, workers=workers), done, cons,
-                         settings.front, priors=priors,
-                         on_finished=None if finer is None else finer.offer)
     if not front.layouts:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)" if max_tendons
                          else "no extractor's tendons make a layout of one tendon or more" + _pattern_said(ex))
@@ -368,7 +384,7 @@ def recommended(recording: str | Path | RecordedRun, settings: DesignSettings = 
     chosen = recommend(rows, budget, max_tendons, min_capstan)
     layout = front.layouts[chosen["count"]]
     summary = _summary(ex, layout, chosen, rows, settings, ms=ms)
-    summary["search"] = {**front.as_json(), "beam": settings.front.beam,
+    summary["search"] = {**front.as_json(), "beam": settings.front.beam, "stage": ex.stage,
                          "routes_from": None if prior is None or prior.path is None else str(prior.path),
                          "converged_resolution": None if fine is None else fine["resolution"],
                          **({"converge_error": fine["error"]} if fine and fine.get("error") else {})}
