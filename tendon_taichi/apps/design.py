@@ -39,6 +39,7 @@ from ..io.outputs import design_outputs
 from ..io.plots import load as load_pictures, plot_front
 from ..io.progress import Progress
 from ..io.recording import RecordedRun, rewrite
+from ..optimizer.soft_ik import Figures
 from ..physics import runtime
 from ..tasks.pool import Pool
 from .extract import Extraction, extract, frictionless_error, log_layout
@@ -263,7 +264,7 @@ def coarse_prior(scene: Scene, level: int, settings: DesignSettings, progress: P
     with tempfile.TemporaryDirectory(prefix="tendon-taichi-coarse-") as tmp:
         run = optimize(scene, level, settings.solver, record=Path(tmp) / "run.rrd", progress=progress,
                        options=RunOptions(export=Path(tmp) / "run.npz", factor_threads=threads))
-        nearest = reach(run)
+        nearest = reach(run).pose_error_rel
         why = (f"the optimized fibers come no closer to the goals than {100 * nearest:.2f}% of L, above the budget"
                if nearest > settings.budget else None)
         if why is None:
@@ -298,9 +299,9 @@ def check_reach(run: RunResult, budget: float) -> None:
     tendon layout is expected to beat every fiber together, and the search for
     one over the many tendons such fibers make takes many minutes; the run stays
     in its recording, and the message names the budget that designs anyway."""
-    if reach(run) <= budget:
+    best = reach(run)
+    if best.pose_error_rel <= budget:
         return
-    best = min(run.stages, key=lambda st: st.figures.pose_error_rel).figures
     enough = _rounded_up(best.pose_error_rel)
     way_on = f"; a --budget of {enough:g} or more designs anyway" if enough < 1.0 else ""
     raise InputError(f"the goals are out of reach: the optimized fibers come no closer to them than "
@@ -309,10 +310,11 @@ def check_reach(run: RunResult, budget: float) -> None:
                      f"{run.recording}{way_on}")
 
 
-def reach(run: RunResult) -> float:
-    """How near the optimized fibers of ``run`` come to the goals: the least pose
-    error (fraction of L) of its stages, stage 0 (every fiber free) included."""
-    return min(st.figures.pose_error_rel for st in run.stages)
+def reach(run: RunResult) -> Figures:
+    """How near the optimized fibers of ``run`` come to the goals: the figures of its
+    stage of least pose error (``pose_error_rel``, fraction of L; ``pose_error``, m),
+    stage 0 (every fiber free) included."""
+    return min(run.stages, key=lambda st: st.figures.pose_error_rel).figures
 
 
 def _rounded_up(x: float) -> float:
@@ -350,7 +352,8 @@ def recommended(recording: str | Path | RecordedRun, settings: DesignSettings = 
     def log(text: str) -> None:
         progress.message(f"design: {text}")
 
-    stage, extract_s = None, 0.0
+    stage, extract_s, ready = None, 0.0, False
+    priors = finer = None
     while True:  # the last stage, or - where its pattern makes no layout - the one before, ...
         t1 = time.perf_counter()
         ex = extract(recording, replace(how, stage=stage), log=log, workers=workers)
@@ -359,11 +362,12 @@ def recommended(recording: str | Path | RecordedRun, settings: DesignSettings = 
         done = [r.consolidation for r in ex.results if r.error is None and r.consolidation is not None]
         front = None
         if done:
-            priors = None
-            if prior is not None:
-                priors = prior_layouts(prior, problem)
-                log(f"{len(priors)} of the {len(prior.layouts)} layouts of {prior.name} join the front's seeds")
-            finer = FinerMesh(problem, ex.run.settings, solver, workers) if converge else None
+            if not ready:  # the prior's layouts and the finer mesh: the same for every stage read
+                if prior is not None:
+                    priors = prior_layouts(prior, problem)
+                    log(f"{len(priors)} of the {len(prior.layouts)} layouts of {prior.name} join the front's seeds")
+                finer = FinerMesh(problem, ex.run.settings, solver, workers) if converge else None
+                ready = True
             front = search_front(Context(problem, ex.state, ex.run.settings, solver, log=log, workers=workers),
                                  done, cons, settings.front, priors=priors,
                                  on_finished=None if finer is None else finer.offer)

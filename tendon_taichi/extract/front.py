@@ -517,10 +517,7 @@ def _screened(search: _Search, layout: Layout, routes: list[Route]) -> Layout | 
     most ``EXTEND_SCREEN`` SLSQP iterations; None when they cannot be solved."""
     start = np.atleast_2d(layout.realizable.ratios).reshape(search.problem.n_poses, -1)
     lay = search.solve(routes, start, layout)
-    if lay is None:
-        return None
-    done = search.finish(lay, rounds=1, iterations=EXTEND_SCREEN)[0]
-    return replace(done, source=sources(routes), optimized=False)
+    return None if lay is None else _screened_layout(search, lay)
 
 
 def _screen_task(spec: tuple, job: tuple[Layout, list[Route]]) -> tuple[Layout | None, dict]:
