@@ -359,14 +359,12 @@ def test_public_functions_take_few_parameters():
 
 
 def test_no_call_passes_more_than_five_positional_arguments():
-    """Beyond five, arguments go by keyword (the physics layer's launches and Taichi's
-    kernels, which take fields and scalars, aside)."""
+    """Beyond five, arguments go by keyword, in Python and inside Taichi kernels and funcs
+    alike (``ti.func`` takes keywords too)."""
     long = []
-    for where, tree, kernel in _trees():
-        if where.startswith("physics/"):
-            continue
+    for where, tree, _ in _trees():
         for call in ast.walk(tree):
-            if not isinstance(call, ast.Call) or id(call) in kernel:
+            if not isinstance(call, ast.Call):
                 continue
             name = ast.unparse(call.func).rpartition(".")[2]
             if len([x for x in call.args if not isinstance(x, ast.Starred)]) > MAX_POSITIONAL \

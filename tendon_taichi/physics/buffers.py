@@ -119,13 +119,13 @@ def _entry(fb: ti.template(), ib: ti.template(), slot, unused, i) -> ti.f64:
 @ti.func
 def dot_nodes(fb: ti.template(), ib: ti.template(), aslot, bslot, out, serial: ti.template()):
     """scalars[out] = sum_i a_i . b_i over nodes."""
-    reduce_blocks(fb, ib, ib[Slot.N], _node_dot, aslot, bslot, out, serial)
+    reduce_blocks(fb, ib, ib[Slot.N], _node_dot, aslot, b=bslot, out=out, serial=serial)
 
 
 @ti.func
 def sum_array(fb: ti.template(), ib: ti.template(), slot, count, out, serial: ti.template()):
     """scalars[out] = sum of the f64 array at ``slot`` over [0, count)."""
-    reduce_blocks(fb, ib, count, _entry, slot, 0, out, serial)
+    reduce_blocks(fb, ib, count, _entry, slot, b=0, out=out, serial=serial)
 
 
 # ---------------------------------------------------------------- copies between the buffers and numpy

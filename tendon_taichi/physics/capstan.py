@@ -94,7 +94,7 @@ class Capstan:
         Theta = self.cable_suffix_sum(np.abs(theta))
         w = np.exp(-self.mu * Theta)
         rho = np.bincount(self.cable, w * self.l0, minlength=len(self.l0_sum)) / self.l0_sum
-        return CapstanState(points, d, l, theta, Theta, w, rho)
+        return CapstanState(points, d, l, theta, Theta, w=w, rho=rho)
 
 
 @dataclass(frozen=True)

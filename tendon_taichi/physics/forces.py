@@ -166,11 +166,11 @@ def energy(fb: ti.template(), ib: ti.template(), xslot, serial: ti.template()):
             psi = neo_hookean_psi(Fe, mu, lam)
         set_f(fb, ib, Slot.EE, e, get_f(fb, ib, Slot.VOL, e) * psi)
     update_cables(fb, ib, xslot, serial)
-    sum_array(fb, ib, Slot.EE, ib[Slot.M], Scalar.S0, serial)
+    sum_array(fb, ib, Slot.EE, ib[Slot.M], Scalar.S0, serial=serial)
     body = get_sc(fb, ib, Scalar.S0)
-    sum_array(fb, ib, Slot.CE, ib[Slot.C], Scalar.S0, serial)
+    sum_array(fb, ib, Slot.CE, ib[Slot.C], Scalar.S0, serial=serial)
     cables = get_sc(fb, ib, Scalar.S0)
-    dot_nodes(fb, ib, Slot.FEXT, xslot, Scalar.S0, serial)
+    dot_nodes(fb, ib, Slot.FEXT, xslot, Scalar.S0, serial=serial)
     set_sc(fb, ib, Scalar.S0, body + cables - get_sc(fb, ib, Scalar.S0))
 
 
@@ -184,13 +184,13 @@ def gradient(fb: ti.template(), ib: ti.template(), serial: ti.template()):
         store_element_vectors(fb, ib, e, get_f(fb, ib, Slot.VOL, e) * P @ get_m2(fb, ib, Slot.BM, e).transpose())
     update_cables(fb, ib, Slot.X, serial)
     segment_vectors_along(fb, ib, Slot.TAU, serial)
-    gather(fb, ib, Slot.G, True, False, serial)
+    gather(fb, ib, Slot.G, True, False, serial=serial)
     ti.loop_config(serialize=serial)
     for i in range(ib[Slot.N]):
         g = get_v(fb, ib, Slot.G, i) - get_v(fb, ib, Slot.FEXT, i)
         set_v(fb, ib, Slot.G, i, g)
         set_v(fb, ib, Slot.VOUT, i, g * get_v(fb, ib, Slot.MASK, i))
-    dot_nodes(fb, ib, Slot.VOUT, Slot.VOUT, Scalar.S0, serial)
+    dot_nodes(fb, ib, Slot.VOUT, Slot.VOUT, Scalar.S0, serial=serial)
 
 
 @ti.func
@@ -296,7 +296,7 @@ def apply_hessian(fb: ti.template(), ib: ti.template(), src, dst, masked: ti.tem
         if l > 0.0:
             v += get_f(fb, ib, Slot.TAU, c) * w / l * (dd - nv * nv.dot(dd))
         set_v(fb, ib, Slot.SEG_VEC, s, v)
-    gather(fb, ib, dst, True, masked, serial)
+    gather(fb, ib, dst, True, masked, serial=serial)
 
 
 # ---------------------------------------------------------------- kernels
@@ -422,7 +422,7 @@ def k_hessian_entries(fb: F64, ib: I32, out: ti.types.ndarray(dtype=ti.f64, ndim
                        serial: ti.template()):
     """The Hessian's block entries (:func:`hessian_blocks`), (36 m + 144 S,): for the
     direct backend's assembly and its tests."""
-    hessian_blocks(fb, ib, out, out, False, serial)  # no scatter: out passed in its place
+    hessian_blocks(fb, ib, out, out, False, serial=serial)  # no scatter: out passed in its place
 
 
 @kernel
@@ -436,12 +436,12 @@ def k_hessian_sums(fb: F64, ib: I32, scatter: ti.types.ndarray(dtype=ti.i32, ndi
     ti.loop_config(serialize=True)
     for q in range(out.shape[0]):
         out[q] = 0.0
-    hessian_blocks(fb, ib, out, scatter, True, True)
+    hessian_blocks(fb, ib, out, scatter, True, serial=True)
 
 
 @kernel
 def k_hessian_product(fb: F64, ib: I32, serial: ti.template()):
-    apply_hessian(fb, ib, Slot.VIN, Slot.VOUT, False, serial)
+    apply_hessian(fb, ib, Slot.VIN, Slot.VOUT, False, serial=serial)
 
 
 @kernel
@@ -454,7 +454,7 @@ def k_cables_to_nodes(fb: F64, ib: I32, serial: ti.template()):
     """VOUT = sum_c CCOEF_c dL_c/dx."""
     update_cables(fb, ib, Slot.X, serial)
     segment_vectors_along(fb, ib, Slot.CCOEF, serial)
-    gather(fb, ib, Slot.VOUT, False, False, serial)
+    gather(fb, ib, Slot.VOUT, False, False, serial=serial)
 
 
 @kernel

@@ -61,7 +61,7 @@ def _body_arrays(mesh: Mesh, mat: Material) -> _BodyArrays:
         Dm = np.stack([X[T[:, 1]] - X[T[:, 0]], X[T[:, 2]] - X[T[:, 0]]], axis=2)
         mass = np.zeros(mesh.n_nodes)
         np.add.at(mass, T.ravel(), np.repeat(mat.density * mat.thickness * mesh.areas / 3.0, 3))
-        arrays = _BodyArrays(X, T, start, order, np.linalg.inv(Dm), mat.thickness * mesh.areas, mass)
+        arrays = _BodyArrays(X, T, start, order, np.linalg.inv(Dm), vol=mat.thickness * mesh.areas, mass=mass)
         for a in vars(arrays).values():
             a.flags.writeable = False
         per_mesh[key] = arrays
@@ -115,7 +115,7 @@ class Model:
 
     # ------------------------------------------------------------ upload
     def _upload(self) -> None:
-        host = allocate(self.n, self.m, self.S, self.C, self.P, self.single)
+        host = allocate(self.n, self.m, self.S, self.C, self.P, single=self.single)
         self.offset = host.offset
         mesh, cab, mat = self.mesh, self.cables, self.material
         body = _body_arrays(mesh, mat)
@@ -391,8 +391,8 @@ class Model:
             return None
         cs = self.cable_state()
         st = self.capstan.state(self.cable_points())
-        return FrictionJacobian(self.capstan, st, cs["tau"], cs["kc"], cs["e"], self.cables.a0 - cs["ac"],
-                                self.point_map)
+        return FrictionJacobian(self.capstan, st, cs["tau"], cs["kc"], cs["e"], free_length=self.cables.a0 - cs["ac"],
+                                pm=self.point_map)
 
     def tensions(self) -> np.ndarray:
         """Cable tensions tau (C,), N, at the current x."""

@@ -43,7 +43,7 @@ def rest_point_gradient(model, lam: np.ndarray) -> np.ndarray:
     x = model.positions()
     st = cap.state(cables.points.positions(mesh.triangles, x))
     cs = model.cable_state()
-    fj = FrictionJacobian(cap, st, cs["tau"], cs["kc"], cs["e"], cables.a0 - cs["ac"], model.point_map)
+    fj = FrictionJacobian(cap, st, cs["tau"], cs["kc"], cs["e"], free_length=cables.a0 - cs["ac"], pm=model.point_map)
     c = cap.cable
     tau, kc, e = cs["tau"][c], cs["kc"][c], cs["e"][c]
     ratio = (cs["ac"] / cables.a0)[c]

@@ -24,12 +24,12 @@ def cg_residual(fb: ti.template(), ib: ti.template(), warm: ti.i32, serial: ti.t
         if warm != 0:
             x0 = get_v(fb, ib, Slot.CX, i) * m
         set_v(fb, ib, Slot.CX, i, x0)
-    apply_hessian(fb, ib, Slot.CX, Slot.CQ, True, serial)
+    apply_hessian(fb, ib, Slot.CX, Slot.CQ, True, serial=serial)
     ti.loop_config(serialize=serial)
     for i in range(ib[Slot.N]):
         set_v(fb, ib, Slot.CR, i, get_v(fb, ib, Slot.CB, i) - get_v(fb, ib, Slot.CQ, i))
-    dot_nodes(fb, ib, Slot.CR, Slot.CR, Scalar.RR, serial)
-    dot_nodes(fb, ib, Slot.CB, Slot.CB, Scalar.BB, serial)
+    dot_nodes(fb, ib, Slot.CR, Slot.CR, Scalar.RR, serial=serial)
+    dot_nodes(fb, ib, Slot.CB, Slot.CB, Scalar.BB, serial=serial)
 
 
 @ti.func
@@ -40,7 +40,7 @@ def cg_begin(fb: ti.template(), ib: ti.template(), warm: ti.i32, tol: ti.f64, se
         z = get_m2(fb, ib, Slot.MINV, i) @ get_v(fb, ib, Slot.CR, i)
         set_v(fb, ib, Slot.CZ, i, z)
         set_v(fb, ib, Slot.CP, i, z)
-    dot_nodes(fb, ib, Slot.CR, Slot.CZ, Scalar.RZ, serial)
+    dot_nodes(fb, ib, Slot.CR, Slot.CZ, Scalar.RZ, serial=serial)
     set_sc(fb, ib, Scalar.TOL2, tol * tol * get_sc(fb, ib, Scalar.BB))
     set_cg(ib, CGState.ITERS, 0)
     set_cg(ib, CGState.NEGCURV, 0)
@@ -52,8 +52,8 @@ def cg_begin(fb: ti.template(), ib: ti.template(), warm: ti.i32, tol: ti.f64, se
 @ti.func
 def cg_iteration(fb: ti.template(), ib: ti.template(), serial: ti.template()):
     """One PCG iteration; once done, alpha = 0 leaves the solution unchanged."""
-    apply_hessian(fb, ib, Slot.CP, Slot.CQ, True, serial)
-    dot_nodes(fb, ib, Slot.CP, Slot.CQ, Scalar.PQ, serial)
+    apply_hessian(fb, ib, Slot.CP, Slot.CQ, True, serial=serial)
+    dot_nodes(fb, ib, Slot.CP, Slot.CQ, Scalar.PQ, serial=serial)
     alpha = 0.0
     if get_cg(ib, CGState.DONE) == 0:
         if get_sc(fb, ib, Scalar.PQ) <= 0.0:
@@ -67,8 +67,8 @@ def cg_iteration(fb: ti.template(), ib: ti.template(), serial: ti.template()):
         r = get_v(fb, ib, Slot.CR, i) - alpha * get_v(fb, ib, Slot.CQ, i)
         set_v(fb, ib, Slot.CR, i, r)
         set_v(fb, ib, Slot.CZ, i, get_m2(fb, ib, Slot.MINV, i) @ r)
-    dot_nodes(fb, ib, Slot.CR, Slot.CZ, Scalar.S1, serial)
-    dot_nodes(fb, ib, Slot.CR, Slot.CR, Scalar.RR, serial)
+    dot_nodes(fb, ib, Slot.CR, Slot.CZ, Scalar.S1, serial=serial)
+    dot_nodes(fb, ib, Slot.CR, Slot.CR, Scalar.RR, serial=serial)
     beta = 0.0
     if get_cg(ib, CGState.DONE) == 0:
         set_cg(ib, CGState.ITERS, get_cg(ib, CGState.ITERS) + 1)
@@ -124,8 +124,8 @@ def k_pcg_begin(fb: F64, ib: I32, warm: ti.i32, r_out: NDARRAY, serial: ti.templ
 @kernel
 def k_pcg_matvec(fb: F64, ib: I32, serial: ti.template()) -> ti.f64:
     """CQ = H CP on the free DOFs; returns CP . CQ."""
-    apply_hessian(fb, ib, Slot.CP, Slot.CQ, True, serial)
-    dot_nodes(fb, ib, Slot.CP, Slot.CQ, Scalar.PQ, serial)
+    apply_hessian(fb, ib, Slot.CP, Slot.CQ, True, serial=serial)
+    dot_nodes(fb, ib, Slot.CP, Slot.CQ, Scalar.PQ, serial=serial)
     return get_sc(fb, ib, Scalar.PQ)
 
 
@@ -138,7 +138,7 @@ def k_pcg_update(fb: F64, ib: I32, alpha: ti.f64, r_out: NDARRAY, serial: ti.tem
         r = get_v(fb, ib, Slot.CR, i) - alpha * get_v(fb, ib, Slot.CQ, i)
         set_v(fb, ib, Slot.CR, i, r)
         r_out[2 * i], r_out[2 * i + 1] = r[0], r[1]
-    dot_nodes(fb, ib, Slot.CR, Slot.CR, Scalar.RR, serial)
+    dot_nodes(fb, ib, Slot.CR, Slot.CR, Scalar.RR, serial=serial)
     return get_sc(fb, ib, Scalar.RR)
 
 

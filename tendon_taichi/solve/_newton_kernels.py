@@ -28,7 +28,7 @@ def k_take_direction(fb: F64, ib: I32, from_cg: ti.i32, serial: ti.template()) -
         if from_cg != 0:
             v = get_v(fb, ib, Slot.CX, i)
         set_v(fb, ib, Slot.DX, i, v * get_v(fb, ib, Slot.MASK, i))
-    dot_nodes(fb, ib, Slot.G, Slot.DX, Scalar.S0, serial)
+    dot_nodes(fb, ib, Slot.G, Slot.DX, Scalar.S0, serial=serial)
     return get_sc(fb, ib, Scalar.S0)
 
 
@@ -38,7 +38,7 @@ def k_direction_from(fb: F64, ib: I32, d_in: NDARRAY, serial: ti.template()) -> 
     ti.loop_config(serialize=serial)
     for i in range(ib[Slot.N]):
         set_v(fb, ib, Slot.DX, i, vec2(d_in[2 * i], d_in[2 * i + 1]) * get_v(fb, ib, Slot.MASK, i))
-    dot_nodes(fb, ib, Slot.G, Slot.DX, Scalar.S0, serial)
+    dot_nodes(fb, ib, Slot.G, Slot.DX, Scalar.S0, serial=serial)
     return get_sc(fb, ib, Scalar.S0)
 
 
