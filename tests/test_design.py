@@ -14,7 +14,7 @@ import pytest
 import shapely
 
 from reference import as_built_residual
-from tendon_taichi.apps.design import recommend
+from tendon_taichi.apps.design import recommend, unaccounted
 from tendon_taichi.io.recording import read_chunks, read_recording
 from tendon_taichi.solve.cholesky import cholesky_library
 
@@ -146,6 +146,20 @@ def test_the_routes_are_in_the_recording(designed):
     assert {"/design/routes/rest", "/design/routes/realizable/tendons", "/design/summary"} <= paths
 
 
+def test_every_extracted_tendon_is_accounted_for_in_design_json(designed):
+    """From design.json alone: each extractor's tendons made its strands, each drop
+    and join took one away, and its count are left - none went missing silently."""
+    d, _ = designed
+    rows = json.loads((d / "out" / "design.json").read_text())["extractors"]
+    assert rows and all("error" not in r for r in rows)
+    for r in rows:
+        assert r["extracted_count"] >= r["strands"] >= r["count"] >= 1 and unaccounted(r) == 0, r
+    lost = {**rows[0], "count": rows[0]["count"] - 1}  # one fewer than the steps leave: lost silently
+    assert unaccounted(lost) == 1
+    assert unaccounted({**rows[0], "strands": rows[0]["extracted_count"] + 1}) >= 1  # merging never adds
+    assert unaccounted({"name": "x", "error": "it failed", "steps": None}) is None
+
+
 def _entry(count, error, capstan, length):
     return {"count": count, "realizable_pose_error_rel": error, "capstan_worst": capstan, "total_length": length,
             "id": f"{count}-{error}-{capstan}-{length}"}
@@ -177,6 +191,19 @@ def test_outside_the_budget_a_tendon_that_buys_only_rounding_is_not_recommended(
     assert recommend(rows, 0.005)["count"] == 1  # a slack second tendon, equal to the last bits
     rows[1]["realizable_pose_error_rel"] = 0.009
     assert recommend(rows, 0.005)["count"] == 2
+
+
+def test_outside_the_budget_a_tendon_must_buy_the_consolidation_tolerance():
+    """None within the budget: a tendon more is recommended only where it lowers the
+    error by more than consolidation's tolerance (a generated case's front: 6
+    tendons bought 0.014 % of L over 2)."""
+    errors = {1: 0.00916, 2: 0.00705, 3: 0.00705, 4: 0.00693, 5: 0.00692, 6: 0.00691}
+    rows = [{"count": k, "realizable_pose_error_rel": e, "capstan_worst": 0.85, "total_length": 0.1 * k}
+            for k, e in errors.items()]
+    assert recommend(rows, 0.005)["count"] == 6  # the soft IK's precision alone
+    assert recommend(rows, 0.005, tolerance=0.001)["count"] == 2
+    assert recommend(rows, 0.005, tolerance=0.0001)["count"] == 4
+    assert recommend(rows, 0.005, max_tendons=3, tolerance=0.0001)["count"] == 2
 
 
 def test_a_capstan_limit_takes_the_fewest_tendons_that_keep_it():

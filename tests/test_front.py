@@ -213,6 +213,25 @@ def _planted_tendons(p, st):
     return _tendons(p, [lattice_path(p, [np.array(q) for q in line]) for line in LINES], st)
 
 
+@pytest.mark.parametrize("stall", [1, 2])
+def test_where_none_is_within_the_budget_counts_that_buy_nothing_end_the_front(searched, monkeypatch, stall):
+    """No count within the budget, and each count above one lowers the error by
+    less than the tolerance (here half of L): after STALL such counts in a row the
+    counts above are left out, and the front's JSON says which."""
+    from dataclasses import replace
+
+    import tendon_taichi.extract.front as front_module
+
+    p, st, greedy, _ = searched
+    monkeypatch.setattr(front_module, "STALL", stall)
+    options = replace(OPTIONS, budget=1e-9, tolerance=0.5)
+    front = search_front(Context(p, st, p.scene.optimize, "direct"), greedy, options)
+    # counts 2 and 3 each buy less than the tolerance: one such count ends the front, or two in a row
+    kept, left = ([1, 2], [3]) if stall == 1 else ([1, 2, 3], [])
+    assert sorted(front.layouts) == kept and front.left == left
+    assert front.as_json()["left"] == front.left
+
+
 def test_the_descent_reduces_finished_layouts(searched, monkeypatch):
     """Where finishing the two-tendon layouts left a poor one (here: the
     one-tendon layout and a slack route - no better than one tendon), the

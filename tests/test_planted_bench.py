@@ -124,6 +124,7 @@ def test_planted_bench_command_on_one_case(tmp_path):
     assert case["passed"] and route_rule(case), case
     assert case["count"] <= 2 and case["realizable_pose_error_rel"] <= 0.01 and case["length_ratio"] <= 2.0
     assert case["count"] == len(case["tendons"])
+    assert case["dropped"] == 0 and res["totals"]["dropped"] == 0  # every extracted tendon accounted for
     assert all(s in case["extractors"] or s == "join" for s in case["best"].split("+"))  # where its routes came from
     assert case["length_ratio"] == pytest.approx(case["active_length"] / case["planted_length"])
     assert case["front"] and case["planted_as_built_error_rel"] is not None
@@ -223,14 +224,15 @@ def test_levels_compare_the_recommended_count_and_the_fronts():
 def test_each_level_searches_from_the_level_befores_designs(tmp_path, monkeypatch, coarse_to_fine):
     """``--levels``: from the coarsest up, each level's cases get the level before's
     design.json of the same case as their prior design (where one was written);
-    ``--independent-levels``: none."""
+    ``--independent-levels``: none, and no case designs its coarser level either."""
     import tendon_taichi.planted.levels as levels
     from tendon_taichi.planted.bench import case_folder
 
-    seen = {}
+    seen, coarse = {}, {}
 
     def fake_suite(directory, level, out_dir, settings, **kwargs):
         seen[level] = settings.priors
+        coarse[level] = settings.front.coarse
         for c in load_suite(directory)[:2]:  # two cases designed, the rest failed
             folder = case_folder(Path(out_dir) / "cases", c.name, level)
             folder.mkdir(parents=True)
@@ -240,6 +242,7 @@ def test_each_level_searches_from_the_level_befores_designs(tmp_path, monkeypatc
     monkeypatch.setattr(levels, "run_suite", fake_suite)
     res = levels.run_levels(SUITE, [3, 1, 2], tmp_path, coarse_to_fine=coarse_to_fine)
     assert list(seen) == [1, 2, 3] and seen[1] is None and res["coarse_to_fine"] == coarse_to_fine
+    assert coarse == {lv: coarse_to_fine for lv in (1, 2, 3)}  # a level with priors ignores its own
     if not coarse_to_fine:
         assert seen[2] is None and seen[3] is None
         return

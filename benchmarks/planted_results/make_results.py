@@ -204,6 +204,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     suite = suite_folder(args)
     front = front_settings(args)
+    if args.independent_levels:
+        front["coarse"] = False  # each level on its own: no case designs its coarser level either
     overrides = dict(_setting(s) for s in args.set)
     runs = []
     levels = sorted(set(args.levels))

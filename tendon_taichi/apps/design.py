@@ -92,13 +92,16 @@ def front_rows(front: Front, fine: dict | None, mu: float, kink_angle: float) ->
     return rows
 
 
-def recommend(rows: list[dict], budget: float, max_tendons: int | None = None, min_capstan: float = 0.0) -> dict:
+def recommend(rows: list[dict], budget: float, max_tendons: int | None = None, min_capstan: float = 0.0,
+              tolerance: float = 0.0) -> dict:
     """The fewest tendons (at most ``max_tendons``) whose as-built error is within
     ``budget`` (fraction of L) and whose worst capstan factor is at least
     ``min_capstan`` (the pull that reaches a tendon's far end, a fraction), the best
     worst capstan among them, then the shortest; when none keeps the capstan limit,
     the same without it; when none is within the budget, the lowest as-built error
-    (the fewest tendons among those within the soft IK's precision of it)."""
+    - the fewest tendons among those within ``tolerance`` (fraction of L,
+    consolidation's: a tendon that lowers the error by less pulls no weight) or
+    the soft IK's precision, the larger, of it."""
     pool = [e for e in rows if max_tendons is None or e["count"] <= max_tendons]
     if not pool:
         raise InputError(f"no layout of at most {max_tendons} tendon(s) was found (--max-tendons)")
@@ -106,8 +109,8 @@ def recommend(rows: list[dict], budget: float, max_tendons: int | None = None, m
     kept = [e for e in within if e["capstan_worst"] >= min_capstan] or within
     if kept:
         return min(kept, key=lambda e: (e["count"], -e["capstan_worst"], e["total_length"]))
-    least = min(e["realizable_pose_error_rel"] for e in pool)  # a tendon more that buys only rounding is none
-    return min([e for e in pool if e["realizable_pose_error_rel"] <= least + PRECISION],
+    least = min(e["realizable_pose_error_rel"] for e in pool)
+    return min([e for e in pool if e["realizable_pose_error_rel"] <= least + max(tolerance, PRECISION)],
                key=lambda e: (e["count"], e["realizable_pose_error_rel"]))
 
 
@@ -385,7 +388,7 @@ def recommended(recording: str | Path | RecordedRun, settings: DesignSettings = 
                          else "no extractor's tendons make a layout of one tendon or more" + _pattern_said(ex))
     fine = finer_mesh_errors(ex, front, cons, log, workers=workers, finer=finer) if converge else None
     rows = front_rows(front, fine, ms.mu, ms.kink_angle)
-    chosen = recommend(rows, budget, max_tendons, min_capstan)
+    chosen = recommend(rows, budget, max_tendons, min_capstan, tolerance=max(cons.tolerance, 0.0))
     layout = front.layouts[chosen["count"]]
     summary = _summary(ex, layout, chosen, rows, settings, ms=ms)
     summary["search"] = {**front.as_json(), "beam": settings.front.beam, "stage": ex.stage,
@@ -396,6 +399,33 @@ def recommended(recording: str | Path | RecordedRun, settings: DesignSettings = 
                              converge_s=None if fine is None else fine["time_s"],
                              route_s=summary["timing"]["route_s"] + front.route_s)
     return ex, layout, summary
+
+
+def _extractor_row(r) -> dict:
+    """An extractor's entry in ``design.json``: its final figures and what became
+    of the tendons it returned (:func:`unaccounted`)."""
+    cons = r.consolidation
+    return {"name": r.name, "count": r.metrics.get("count"),
+            "realizable_pose_error_rel": r.metrics.get("realizable_pose_error_rel"),
+            "capstan_worst": r.metrics.get("capstan_worst"), "time_s": r.time_s,
+            "extracted_count": None if cons is None else cons.extracted_count,
+            "strands": None if cons is None else (cons.extracted_count if cons.strands is None else cons.strands),
+            "steps": None if cons is None else [s.as_json() for s in cons.steps],
+            **({"error": r.error} if r.error else {})}
+
+
+def unaccounted(row: dict) -> int | None:
+    """How many of an extractor's tendons went missing without a step that says so,
+    from its ``design.json`` entry alone: its ``extracted_count`` tendons make
+    ``strands`` routes (pieces of one strand merged; the progress says so), each
+    ``drop`` and ``join`` step takes one away, and ``count`` are left - anything
+    else is a tendon lost silently, which none may be (``docs/method.md``,
+    Consolidation). None for an extractor that failed."""
+    if row.get("error") or row.get("steps") is None:
+        return None
+    removed = sum(1 for s in row["steps"] if s["action"] in ("drop", "join"))
+    merged_wrongly = max(row["strands"] - row["extracted_count"], 0)  # merging never adds a route
+    return abs(row["strands"] - removed - row["count"]) + merged_wrongly
 
 
 def _pattern_said(ex: Extraction) -> str:
@@ -502,10 +532,7 @@ def _summary(ex: Extraction, layout: Layout, chosen: dict, rows: list[dict], set
                             "tendons": tendon_rows(layout, ms.mu, metrics["clearances"], problem.scene),
                             "metrics": metrics},
             "front": rows,
-            "extractors": [{"name": r.name, "count": r.metrics.get("count"),
-                            "realizable_pose_error_rel": r.metrics.get("realizable_pose_error_rel"),
-                            "capstan_worst": r.metrics.get("capstan_worst"), "time_s": r.time_s,
-                            **({"error": r.error} if r.error else {})} for r in ex.results],
+            "extractors": [_extractor_row(r) for r in ex.results],
             "timing": {"optimize_s": None, "extract_s": None, "route_s": sum(c.route_s for c in done),
                        "route_evaluations": sum(c.route_evaluations for c in done)},
             "provenance": result_provenance()}

@@ -33,7 +33,9 @@ tendons together:
   costly are finished (``refine`` rounds more), and the least costly of those
   is the count's (:func:`_finish_best`); the count above it, only the best, one
   round; the counts above that are left out (``Front.left``): the recommendation
-  is decided below them;
+  is decided below them. Where none is within the budget yet, the counts above
+  ``STALL`` in a row that each lowered the error by less than consolidation's
+  tolerance are left out the same way;
 * **monotone**: where a count's layout has a larger as-built error than the one
   below (by more than the soft IK's precision, ``PRECISION``), the smaller
   layout with one more pooled route added is solved and kept when it does
@@ -133,6 +135,11 @@ EXTEND_SCREEN = 15
 #: of a count's layouts up to the first count within the budget, the least costly this many
 #: after the screen (:func:`_finish_best`) are finished
 FINISH_BEST = 2
+#: where no count is within the budget yet, after this many counts in a row that each lower the
+#: error by less than consolidation's tolerance below the best of fewer tendons, the counts above
+#: are left out: the recommendation there is the fewest tendons within that tolerance of the
+#: lowest error, and tendons that buy nothing one after the other rarely start to
+STALL = 2
 
 
 @dataclass(frozen=True)
@@ -157,7 +164,8 @@ class Front:
     time a layout's slack routes were left out and the rest replaced the front's
     layout of their count (``count`` before, ``kept`` after, ``error`` as built);
     ``left``: the counts the beam searched above the front's last (one above the
-    first within the budget), left out unfinished; ``on_finished``,
+    first within the budget, or the last of ``STALL`` that bought too little),
+    left out unfinished; ``on_finished``,
     while :func:`search_front` runs, is called with each distinct layout as it
     joins ``finished``."""
 
@@ -252,12 +260,12 @@ def search_front(context: Context, consolidations: list[Consolidation], options:
         kept = {_key(lay, size) for lay in by_count.get(k, [])}
         by_count[k] = by_count.get(k, []) + [lay for lay in found if _key(lay, size) not in kept]
     counts = [k for k in sorted(by_count) if by_count[k] and (max_tendons is None or k <= max_tendons)]
-    horizon = None  # the count above the first within the budget: the most tendons the front finishes
+    horizon = None  # the most tendons the front finishes (the count above the first within the budget)
+    stalled = 0  # counts in a row that bought less than the tolerance
     for k in counts:
         if horizon is not None and k > horizon:
             front.left = [j for j in counts if j > horizon]
-            first = min(j for j, m in front.layouts.items() if m.error <= options.budget)
-            say(f"front: {_counts(front.left)} left out (a {first}-tendon layout is within the budget)")
+            say(f"front: {_counts(front.left)} left out ({_why_left(front, options, stalled)})")
             break
         # up to the first count within the budget, every layout the beam kept (and the exhaustive
         # search found) is screened and the best finished - route optimization can reorder them:
@@ -281,12 +289,26 @@ def search_front(context: Context, consolidations: list[Consolidation], options:
                 front.slack.append({"count": lay.count, "kept": smaller.count, "error": smaller.error})
         if horizon is None and any(m.error <= options.budget for m in front.layouts.values()):
             horizon = k + 1
+        elif horizon is None:
+            fewer = [m.error for j, m in front.layouts.items() if j < k]
+            stalled = stalled + 1 if fewer and front.layouts[k].error > min(fewer) - options.tolerance else 0
+            if stalled >= STALL:
+                horizon = k
     _extend(search, front, pool, size, options)
     _descend(search, front, pool, size, say)
     front.evaluations, front.screened = tally.evaluations, tally.screened
     front.route_evaluations, front.route_s = tally.route_evaluations, tally.route_s
     front.time_s, front.on_finished = time.perf_counter() - t0, None
     return front
+
+
+def _why_left(front: Front, options: ConsolidationSettings, stalled: int) -> str:
+    """Why the front left its higher counts out, for the progress."""
+    within = [j for j, m in front.layouts.items() if m.error <= options.budget]
+    if within:
+        return f"a {min(within)}-tendon layout is within the budget"
+    return (f"none is within the budget, and the last {stalled} counts each lowered the error by less than "
+            f"{100 * options.tolerance:g}% of L")
 
 
 def _counts(counts: list[int]) -> str:

@@ -34,6 +34,7 @@ import numpy as np
 
 from ..apps.case import STOP, CaseSettings, worker_setup
 from ..apps.case import run_case as run_one
+from ..apps.design import unaccounted
 from ..apps.provenance import result_provenance
 from ..body.problem import Problem
 from ..body.scene import Scene, load_scene, with_overrides
@@ -200,8 +201,10 @@ def _prior_id(path: Path | None) -> list | None:
 def score_design(summary: dict, planted_count: int, length_ratio: float) -> dict:
     """A case's design figures: the recommended ``count``, where it came from
     (``best``), its as-built error, the frictionless one, worst capstan, kinks,
-    clearance and tendons, the body size L (m), the ``front``, each extractor's final figures, and
-    whether the case ``passed`` (route rule aside: :func:`route_rule`)."""
+    clearance and tendons, the body size L (m), the ``front``, each extractor's final figures, how
+    many of the extractors' tendons went missing without a step that says so (``dropped``:
+    :func:`~tendon_taichi.apps.design.unaccounted`, None where no extractor's accounting was
+    written), and whether the case ``passed`` (route rule aside: :func:`route_rule`)."""
     rec = summary["recommended"]
     m = rec["metrics"]
     passed = bool(rec["count"] <= planted_count + MAX_EXTRA_TENDONS
@@ -212,7 +215,13 @@ def score_design(summary: dict, planted_count: int, length_ratio: float) -> dict
             "kinks": int(m["kinks"]), "capstan_worst": m["capstan_worst"], "clearance_min": m["clearance_min"],
             "total_length": m["total_length"], "tendons": [t["waypoints"] for t in rec["tendons"]],
             "body_size": summary["body_size"], "front": summary["front"], "extractors": {e["name"]: e for e in summary["extractors"]},
-            "passed": passed}
+            "dropped": _dropped(summary["extractors"]), "passed": passed}
+
+
+def _dropped(extractors: list[dict]) -> int | None:
+    """Tendons the extractors returned that went missing silently, summed over them."""
+    counts = [n for n in map(unaccounted, extractors) if n is not None]
+    return sum(counts) if counts else None
 
 
 def route_rule(case: dict) -> bool:
@@ -242,13 +251,15 @@ def totals(cases: list[dict]) -> dict:
             "median_realizable_pose_error_rel": med("realizable_pose_error_rel"),
             "median_capstan_worst": med("capstan_worst"), "median_planted_capstan_worst": med("planted_capstan_worst"),
             "kinks": sum(c["kinks"] for c in done), "planted_kinks": sum(c["planted_kinks"] for c in done),
+            "dropped": sum(c.get("dropped") or 0 for c in done),
             "time_s": float(sum(c.get("time_s", 0.0) for c in cases))}
 
 
 CSV_COLUMNS = ("case", "scene", "level", "planted_count", "count", "best", "planted_length",
                "active_length", "length_ratio", "pose_error_rel", "realizable_pose_error_rel",
                "realizable_pose_error_rel_frictionless", "planted_as_built_error_rel", "kinks", "planted_kinks",
-               "capstan_worst", "planted_capstan_worst", "clearance_min", "passed", "route_rule", "time_s", "error")
+               "capstan_worst", "planted_capstan_worst", "clearance_min", "passed", "route_rule", "dropped", "time_s",
+               "error")
 
 
 def write_outputs(result: dict, out_dir: Path, suite: list[Case]) -> None:
@@ -352,5 +363,6 @@ def table(result: dict) -> list[str]:
                f"route rule (kinks <= planted; with as many tendons as planted or more, capstan >= planted - "
                f"{CAPSTAN_SLACK:g}) in {t['route_rule']}; "
                f"median capstan {t['median_capstan_worst']} (planted {t['median_planted_capstan_worst']}); "
-               f"median length ratio {t['median_length_ratio']}, total time {t['time_s']:.0f} s")
+               f"median length ratio {t['median_length_ratio']}, "
+               f"{t.get('dropped', 0)} tendon(s) dropped silently, total time {t['time_s']:.0f} s")
     return out

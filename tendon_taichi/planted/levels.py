@@ -17,8 +17,10 @@ level after the first also searches from the coarser level's front: each
 case's design there is its prior design (``design --routes-from``), whose
 layouts join the seeds of its front. Which layouts the lattice leads a
 search to moves with the mesh, and a layout found on a coarser mesh is a
-start the finer one's search may not reach. ``coarse_to_fine=False`` searches
-each level on its own.
+start the finer one's search may not reach. The first level's cases design
+their own coarser level first, as ``design`` does (unless the front's settings
+say ``coarse = false``). ``coarse_to_fine=False`` searches each level on its
+own: no priors, and no case designs a coarser level.
 
 **The same routes.** Where the recommended count is the same at every level,
 ``route_shift`` is how far the recommended routes moved between levels: each
@@ -66,6 +68,8 @@ def run_levels(directory: str | Path, levels: list[int], out_dir: str | Path, co
     out_dir = Path(out_dir)
     runs: dict[int, dict] = {}
     order = sorted(levels)
+    if not coarse_to_fine:
+        settings = replace(settings, front=replace(settings.front, coarse=False))
     for lv, before in zip(order, [None] + order[:-1]):
         priors = prior_designs(directory, out_dir / f"level{before}", before) if coarse_to_fine and before else None
         runs[lv] = run_suite(directory, lv, out_dir / f"level{lv}", replace(settings, priors=priors), **kwargs)
