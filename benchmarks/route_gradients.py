@@ -5,7 +5,7 @@ Usage: python benchmarks/route_gradients.py SCENE [LEVEL] [DESIGN FLAGS ...] [--
 Runs ``tendon-taichi design SCENE --level LEVEL --workers 0`` (default
 level 1, and any further ``design`` flags given) in this process and keeps the
 arguments of every route optimization it makes (``route_replay.record``; with
-``--calls K``, of the first K only).
+``--calls K``, of the first K only, the design stopped there).
 Then it runs them all again N times (default 2) each way, alternating: with
 each point's adjoint solved as the point is valued (what ``optimize_routes``
 did before: the trial points SLSQP's line search rejects had their gradient
@@ -64,7 +64,7 @@ def replay(calls: list[tuple], every_point: bool) -> tuple[float, int, int, list
 def run(argv: list[str]) -> None:
     argv, k = take_calls(argv)
     scene, level, flags, repeat = scene_args(argv, repeat=2)
-    calls = record([scene, "--level", level, *flags])[:k]
+    calls = record([scene, "--level", level, *flags], k)
     runs = alternating(calls, WAYS, replay, repeat)
     print(f"route optimizations: {len(calls)} ({scene} level {level})")
     for label, done in runs.items():

@@ -5,7 +5,8 @@ Usage: python benchmarks/route_replay.py SCENE [LEVEL] [DESIGN FLAGS ...] [--rep
 Runs ``tendon-taichi design SCENE --level LEVEL --workers 0`` (default
 level 1, and any further ``design`` flags given) in this process, into a
 temporary folder, and keeps the arguments of every route optimization it makes
-(with ``--calls K``, of the first K only: a quick look, as the tests take).
+(with ``--calls K``, of the first K only, the design stopped there: a quick
+look, as the tests take).
 Then it runs them all again N times (default 2) with each setting of the direct
 backend, alternating: every moved route's pattern made anew where a waypoint
 crossed into another triangle (``detached_max`` 0), and the default, which keeps
@@ -58,17 +59,28 @@ def _copy(value):
     return value
 
 
-def record(argv: list[str]) -> list[tuple]:
+class Enough(BaseException):
+    """Raised from a probe once a script holds the calls it asked for: the rest of
+    the design is not needed (not an Exception, so nothing on the way turns it
+    into an error line)."""
+
+
+def record(argv: list[str], limit: int | None = None) -> list[tuple]:
     """Run ``design`` with ``argv`` (no workers); return every route optimization's
-    arguments."""
+    arguments - with ``limit``, the first ``limit``, the design stopped there."""
     calls = []
 
     def logged(call, *args, **kwargs):
         kept = {k: _copy(v) for k, v in kwargs.items() if k != "on_iteration"}
         calls.append((tuple(_copy(a) for a in args), kept))
+        if limit is not None and len(calls) >= limit:
+            raise Enough
         return call(*args, **kwargs)
-    with around("optimize_routes", logged), tempfile.TemporaryDirectory() as d:
-        rc = main(["design", *argv, "--quiet", "--workers", "0", "--no-png", "--out", d])
+    try:
+        with around("optimize_routes", logged), tempfile.TemporaryDirectory() as d:
+            rc = main(["design", *argv, "--quiet", "--workers", "0", "--no-png", "--out", d])
+    except Enough:
+        return calls
     if rc:
         sys.exit(rc)
     return calls
@@ -179,7 +191,7 @@ def take_calls(argv: list[str]) -> tuple[list[str], int | None]:
 def run(argv: list[str]) -> None:
     argv, k = take_calls(argv)
     scene, level, flags, repeat = scene_args(argv, repeat=2)
-    calls = record([scene, "--level", level, *flags])[:k]
+    calls = record([scene, "--level", level, *flags], k)
     settings = {"every pattern made anew": 0, "detached segments": direct.DETACHED_MAX}
     runs = alternating(calls, settings, replay, repeat)
     print(f"route optimizations: {len(calls)} ({scene} level {level})")

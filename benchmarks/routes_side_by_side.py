@@ -1,6 +1,6 @@
 """Route optimization's two methods side by side on the calls a real command makes.
 
-Usage: python benchmarks/routes_side_by_side.py SCENE [LEVEL] [DESIGN FLAGS ...]
+Usage: python benchmarks/routes_side_by_side.py SCENE [LEVEL] [DESIGN FLAGS ...] [--calls K]
 
 Runs ``tendon-taichi design SCENE --level LEVEL --workers 0`` (default
 level 1, and any further ``design`` flags given) in this process, into a
@@ -12,8 +12,9 @@ iterations (what it did before). After the design's own table it prints in how
 many calls SLSQP ended lower, the median and extreme ratios of the two
 objectives (L-BFGS-B's includes its penalty, a few 1e-9 at the points it
 ends at), and the evaluations, iterations and time each method took in all. The design
-itself goes on with SLSQP's result. docs/method.md ("Route optimization")
-quotes its figures for t_shape and finger_updown at level 2.
+itself goes on with SLSQP's result; with ``--calls K`` it stops after K route
+optimizations (no table: a quick look, as the tests take). docs/method.md
+("Route optimization") quotes its figures for t_shape and finger_updown at level 2.
 """
 
 import sys
@@ -29,11 +30,14 @@ from tendon_taichi.extract.routing import RouteObjective
 from tendon_taichi.probes import around
 
 from _scene_args import scene_args
+from route_replay import Enough, take_calls
 
 #: the penalty's weight and L-BFGS-B's iterations before
 PENALTY = 1.0e2
 ITERATIONS = 60
 ROWS: list[dict] = []
+#: the route optimizations to run both ways (``--calls K``; None: every one the design makes)
+LIMIT: dict[str, int | None] = {"calls": None}
 
 
 def penalty_lbfgsb(problem, routes, ratios, settings, rs, solver="auto", positions=None) -> tuple[float, int, int]:
@@ -77,6 +81,8 @@ def _both(call, context, routes, ratios, rs, positions=None, on_iteration=None):
     res = call(context, routes, ratios, rs, positions, count)
     ROWS.append({"old": (f_old, ev_old, t1 - t0, it_old),
                  "new": (res.objective, res.evaluations, time.perf_counter() - t1, it["k"])})
+    if LIMIT["calls"] is not None and len(ROWS) >= LIMIT["calls"]:
+        raise Enough
     return res
 
 
@@ -93,9 +99,14 @@ def report() -> None:
 
 
 def run(argv: list[str]) -> int:
+    argv, LIMIT["calls"] = take_calls(argv)
     scene, level, flags, _ = scene_args(argv)
-    with around("optimize_routes", _both), tempfile.TemporaryDirectory() as tmp:
-        rc = main(["design", scene, "--level", level, "--workers", "0", "--out", tmp, *flags])
+    rc = 0
+    try:
+        with around("optimize_routes", _both), tempfile.TemporaryDirectory() as tmp:
+            rc = main(["design", scene, "--level", level, "--workers", "0", "--out", tmp, *flags])
+    except Enough:
+        pass
     report()
     return rc
 
