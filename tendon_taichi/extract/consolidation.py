@@ -59,7 +59,9 @@ from .protocol import IdealizedState, Tendon, turn_angles
 from .realizable import RealizableResult, pose_tension, predict_realizable, solve_realizable_poses, warm_ratios
 from .clearance import clear_route, held_clearance, keeps_as_much
 from .exits import exit_route
-from .routes import Route, fit_route, join_routes, sample_count
+from .joins import join_key, joined_routes, partner_pairs
+from .joins import JOIN_PARTNERS, smooth_joins  # noqa: F401  (their import path before they moved)
+from .routes import Route, fit_route, sample_count
 from .routing import PRICE_PER_BUDGET, RouteSettings, optimize_routes, shape_cost
 from .settings import ConsolidationSettings
 
@@ -68,10 +70,6 @@ from .settings import ConsolidationSettings
 #: bound are route-optimized (one round each) to try to bring them within
 REACH = 4.0
 PROBES = 2
-#: a route is joined only with its JOIN_PARTNERS nearest routes (by the distance between their
-#: nearest ends), so a layout of n routes has O(n) joins, not O(n^2); with at most
-#: JOIN_PARTNERS + 1 routes every pair is a partner
-JOIN_PARTNERS = 3
 #: pieces of one strand (:func:`merge_pieces`): ends at most MERGE_GAP x L apart, running on in
 #: line (tangents and the gap within MERGE_ANGLE of each other)
 MERGE_GAP = 0.04
@@ -215,6 +213,8 @@ class _Search:
         self.out: Consolidation | None = None
         #: worker processes that share the full solves and the screen of :meth:`ranked` (None: none)
         self.workers: Pool | None = context.workers
+        #: the joins made so far (:meth:`joins`), by what of the two routes makes them (:func:`~.joins.join_key`)
+        self._joins: dict[tuple, list[Route]] = {}
 
     # ------------------------------------------------------------ the same search in a worker process
     def spec(self) -> tuple:
@@ -347,8 +347,17 @@ class _Search:
         return out
 
     def joins(self, a: Route, b: Route, reach: float, clearance: float) -> list[Route]:
-        """:func:`smooth_joins` of ``a`` and ``b`` in this search's body."""
-        return smooth_joins(a, b, self.problem, reach, clearance)
+        """:func:`smooth_joins` of ``a`` and ``b`` in this search's body, made once per
+        search for the same two routes: the front's beam meets the same pairs in many
+        layouts and counts (solved, with contractions of their own), and fitting a
+        join that keeps the clearance was most of what the search cost where the
+        extractors over-segment. A join depends on its routes only through
+        :func:`~.joins.join_key`, and routes are never changed in place, so the joins made
+        before are the ones made again, to the bit."""
+        key = (join_key(a), join_key(b), reach, clearance)
+        if key not in self._joins:
+            self._joins[key] = smooth_joins(a, b, self.problem, reach, clearance)
+        return list(self._joins[key])
 
     # ------------------------------------------------------------ routes
     def orient(self, now: Layout) -> tuple[Layout, list[int]]:
@@ -421,53 +430,6 @@ def _predict_task(spec: tuple, job: tuple[list[Route], np.ndarray, Layout]) -> t
     return search.predict(*job), search.tally()
 
 
-def smooth_joins(a: Route, b: Route, problem: Problem, reach: float, clearance: float) -> list[Route]:
-    """Every smooth join of ``a`` and ``b`` end to end (either end of each) whose
-    ends are within ``reach`` (m) and that keeps the ``clearance`` (m; as much of it
-    as the one of them that keeps less, where one is flagged); where routes leave
-    the body, of their cores, carried out of the body again (:func:`~.exits.exit_route`)."""
-    def near(a2: Route, b2: Route) -> bool:
-        return np.linalg.norm(a2.control[-1] - b2.control[0]) <= reach
-
-    return list(_joined(a, b, problem, clearance, near))
-
-
-def _joined(a: Route, b: Route, problem: Problem, clearance: float, joinable: Callable[[Route, Route], bool]):
-    """The smooth joins of ``a`` and ``b`` (their cores) in each end-to-end orientation
-    ``joinable(a2, b2)`` allows (``a2`` ends at the joint, ``b2`` starts there), made
-    as :func:`smooth_joins` says, one at a time: those that keep as much clearance as
-    the one of ``a`` and ``b`` that keeps less."""
-    least = min(held_clearance(a, clearance), held_clearance(b, clearance))
-    a, b = a.inner(), b.inner()  # routes that leave the body are joined without their runs out
-    for a2 in (a, a.reversed()):
-        for b2 in (b, b.reversed()):
-            if joinable(a2, b2):
-                joined = exit_route(join_routes(a2, b2, problem.size), problem, clearance)
-                if keeps_as_much(joined, least, clearance):
-                    yield joined
-
-
-def end_distances(routes: list[Route]) -> np.ndarray:
-    """(T, T): the least distance between an end of route i and an end of route j
-    (cores' ends for routes that leave the body; inf on the diagonal)."""
-    ends = np.array([r.inner().control[[0, -1]] for r in routes]).reshape(len(routes), 2, -1)
-    d = np.linalg.norm(ends[:, None, :, None, :] - ends[None, :, None, :, :], axis=-1).min(axis=(2, 3))
-    np.fill_diagonal(d, np.inf)
-    return d
-
-
-def partner_pairs(routes: list[Route], partners: int = JOIN_PARTNERS) -> list[tuple[int, int]]:
-    """The pairs (i, j), i < j, in order, where j is among i's ``partners`` nearest
-    routes (:func:`end_distances`) or i among j's: at most ``partners`` x T pairs of
-    T routes, every pair where T <= partners + 1."""
-    n = len(routes)
-    if n <= partners + 1:
-        return [(i, j) for i in range(n) for j in range(i + 1, n)]
-    near = np.argsort(end_distances(routes), axis=1, kind="stable")[:, :partners]
-    pairs = {(min(i, int(j)), max(i, int(j))) for i in range(n) for j in near[i]}
-    return sorted(pairs)
-
-
 def _in_line(a: Route, b: Route, gap: float) -> bool:
     """Whether ``a`` (ending where ``b`` starts) runs on into ``b``: their ends within
     ``gap`` and the tangents there, and the gap between, within MERGE_ANGLE."""
@@ -508,7 +470,7 @@ def _first_merge(routes: list[Route], problem: Problem, clearance: float) -> tup
     strand (:func:`_in_line`), and the route they make; None where no two are."""
     gap = MERGE_GAP * problem.size
     for i, j in partner_pairs(routes):
-        one = next(_joined(routes[i], routes[j], problem, clearance, lambda a2, b2: _in_line(a2, b2, gap)), None)
+        one = next(joined_routes(routes[i], routes[j], problem, clearance, lambda a2, b2: _in_line(a2, b2, gap)), None)
         if one is not None:
             return i, j, one
     return None
