@@ -55,7 +55,7 @@ class FiberGraph:
 
     @cached_property
     def directions(self) -> np.ndarray:
-        """Unit rest directions (f, 2)."""
+        """Unit rest directions (f, dim)."""
         d = self.nodes[self.edges[:, 1]] - self.nodes[self.edges[:, 0]]
         return d / self.a0[:, None]
 

@@ -24,8 +24,9 @@ from .geometry import bbox_diagonal
 
 @dataclass(frozen=True)
 class Embedding:
-    """Points embedded in the rest mesh: triangle ``tri`` (k,) and barycentric
-    weights ``bary`` (k, 3), so that a point follows ``sum_j bary_j x[T[tri, j]]``."""
+    """Points embedded in the rest mesh: simplex ``tri`` (k,) (a triangle in 2D, a
+    tetrahedron in 3D) and barycentric weights ``bary`` (k, dim + 1), so that a point
+    follows ``sum_j bary_j x[T[tri, j]]``."""
 
     tri: np.ndarray
     bary: np.ndarray
@@ -215,18 +216,24 @@ def _clean(nodes: np.ndarray, triangles: np.ndarray) -> Mesh:
     return mesh
 
 
-def read_mesh(path: Path) -> Mesh:
-    """Read the triangles of a mesh file with meshio (z coordinates are dropped)."""
+def read_meshio(path: Path):
+    """meshio's reading of the mesh file ``path``, its failures as one
+    :class:`~tendon_taichi.errors.SceneError` line."""
     import meshio
 
     said = io.StringIO()
     try:
         with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
-            m = meshio.read(str(path))
+            return meshio.read(str(path))
     except (Exception, SystemExit) as exc:  # meshio raises many types for bad files; on some it prints and exits
         lines = [ln for ln in (str(exc) if isinstance(exc, Exception) else said.getvalue()).splitlines() if ln.strip()]
         why = lines[0].removeprefix("Error: ") if lines else "not a mesh file meshio can read"
         raise SceneError(f"cannot read mesh file '{path}': {why}") from None
+
+
+def read_mesh(path: Path) -> Mesh:
+    """Read the triangles of a mesh file with meshio (z coordinates are dropped)."""
+    m = read_meshio(path)
     tris = [c.data for c in m.cells if c.type == "triangle"]
     if not tris:
         raise SceneError(f"mesh file '{path}' has no triangle cells")
