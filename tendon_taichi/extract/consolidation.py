@@ -59,8 +59,8 @@ from .protocol import IdealizedState, Tendon, turn_angles
 from .realizable import RealizableResult, pose_tension, predict_realizable, solve_realizable_poses, warm_ratios
 from .clearance import clear_route, held_clearance, keeps_as_much
 from .exits import exit_route
-from .joins import join_key, joined_routes, partner_pairs
-from .joins import JOIN_PARTNERS, smooth_joins  # noqa: F401  (their import path before they moved)
+from .joins import join_key, joined_routes, partner_pairs, smooth_joins
+from .joins import JOIN_PARTNERS  # noqa: F401  (its import path before it moved)
 from .routes import Route, fit_route, sample_count
 from .routing import PRICE_PER_BUDGET, RouteSettings, optimize_routes, shape_cost
 from .settings import ConsolidationSettings
@@ -338,6 +338,7 @@ class _Search:
             out.append(Candidate("drop", (i,), routes[:i] + routes[i + 1:], np.delete(start, i, axis=1)))
         reach = self.options.gap * self.problem.size
         clearance = self.rs.clearance
+        self.make_joins([(routes[i], routes[j]) for i, j in partner_pairs(routes)], reach, clearance)
         for i, j in partner_pairs(routes):
             rest = [r for k, r in enumerate(routes) if k not in (i, j)]
             rest_start = np.delete(start, [i, j], axis=1)
@@ -358,6 +359,20 @@ class _Search:
         if key not in self._joins:
             self._joins[key] = smooth_joins(a, b, self.problem, reach, clearance)
         return list(self._joins[key])
+
+    def make_joins(self, pairs: list[tuple[Route, Route]], reach: float, clearance: float) -> None:
+        """The joins of those ``pairs`` not made yet, made now and kept for :meth:`joins`:
+        shared with the workers where there are any (each join is a fit of its own;
+        the same joins as made here)."""
+        todo: dict[tuple, tuple[Route, Route]] = {}
+        for a, b in pairs:
+            key = (join_key(a), join_key(b), reach, clearance)
+            if key not in self._joins:
+                todo.setdefault(key, (a, b))
+        if self.workers is None or not self.workers.active or len(todo) < 2:
+            return  # made one by one as they are asked for
+        made = self.workers.map(partial(_joins_task, (self.problem, reach, clearance)), list(todo.values()))
+        self._joins.update(zip(todo, made))
 
     # ------------------------------------------------------------ routes
     def orient(self, now: Layout) -> tuple[Layout, list[int]]:
@@ -422,6 +437,13 @@ def _solve_task(spec: tuple, job: tuple[list[Route], np.ndarray, Layout]) -> tup
     """:meth:`_Search.solve` as a worker process runs it (``job``: routes, start, near)."""
     search = _Search.again(spec, job[2])
     return search.solve(*job), search.tally()
+
+
+def _joins_task(spec: tuple, pair: tuple[Route, Route]) -> list[Route]:
+    """:func:`~.joins.smooth_joins` of a pair as a worker process makes them (``spec``:
+    the problem, the reach and the clearance, m)."""
+    problem, reach, clearance = spec
+    return smooth_joins(*pair, problem, reach, clearance)
 
 
 def _predict_task(spec: tuple, job: tuple[list[Route], np.ndarray, Layout]) -> tuple[tuple, dict]:
