@@ -61,12 +61,15 @@ class TableReader:
             self.fail(key, f"must be one of {', '.join(repr(o) for o in options)} (got {v!r})")
         return v
 
-    def point(self, key: str, default=None, required: bool = False) -> tuple[float, float] | None:
+    def point(self, key: str, default=None, required: bool = False, dim: int | None = None,
+              unit: str = "coordinates") -> tuple[float, ...] | None:
+        """The point at ``key`` (:func:`as_point`; ``dim`` the body's dimension, ``unit``
+        what its numbers are called in the error for one of the other dimension)."""
         if key not in self.table:
             if required:
                 self.fail(key, "is required")
             return default
-        return as_point(self.raw(key), f"{self.origin}: {self.where}.{key}")
+        return as_point(self.raw(key), f"{self.origin}: {self.where}.{key}", dim, unit)
 
     def polygon(self, value, name: str) -> np.ndarray:
         where = f"{self.origin}: {self.where}.{name}"
@@ -86,13 +89,27 @@ class TableReader:
 MAX_COORDINATE = 1e6
 
 
-def as_point(v, where: str) -> tuple[float, float]:
-    """``[x, y]`` with two finite numbers of magnitude at most :data:`MAX_COORDINATE`
-    as a tuple; SceneError naming ``where`` otherwise."""
-    if (not isinstance(v, list) or len(v) != 2
-            or any(isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c)
-                   for c in v)):
-        raise SceneError(f"{where} must be [x, y] with two finite numbers (got {v!r})")
-    if max(abs(v[0]), abs(v[1])) > MAX_COORDINATE:
-        raise SceneError(f"{where} must be [x, y] with numbers of magnitude at most {MAX_COORDINATE:g} (got {v!r})")
-    return (float(v[0]), float(v[1]))
+#: the names of a point's coordinates in each dimension, for messages
+_AXES = {2: ("[x, y]", "two"), 3: ("[x, y, z]", "three")}
+
+
+def _numbers(v) -> bool:
+    """Whether ``v`` is a list of finite numbers (not booleans)."""
+    return isinstance(v, list) and all(not isinstance(c, bool) and isinstance(c, (int, float)) and math.isfinite(c)
+                                       for c in v)
+
+
+def as_point(v, where: str, dim: int | None = None, unit: str = "coordinates") -> tuple[float, ...]:
+    """``[x, y]`` (``[x, y, z]`` for ``dim`` 3) with finite numbers of magnitude at most
+    :data:`MAX_COORDINATE` as a tuple; SceneError naming ``where`` otherwise. Given the
+    body's ``dim``, a point of the other dimension is said to be one: "must have 3
+    ``unit`` for a 3D body"."""
+    n = 2 if dim is None else dim
+    if dim is not None and _numbers(v) and len(v) in _AXES and len(v) != dim:
+        raise SceneError(f"{where} must have {dim} {unit} for a {dim}D body (got {v!r})")
+    names, count = _AXES[n]
+    if not _numbers(v) or len(v) != n:
+        raise SceneError(f"{where} must be {names} with {count} finite numbers (got {v!r})")
+    if max(abs(c) for c in v) > MAX_COORDINATE:
+        raise SceneError(f"{where} must be {names} with numbers of magnitude at most {MAX_COORDINATE:g} (got {v!r})")
+    return tuple(float(c) for c in v)

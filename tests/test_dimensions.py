@@ -12,7 +12,7 @@ import pytest
 
 import tendon_taichi as tt
 from tendon_taichi.body import dimension as dimension_module
-from tendon_taichi.body.dimension import PLANE, Dimension, dimension_of, register_dimension
+from tendon_taichi.body.dimension import PLANE, SOLID, Dimension, dimension_of, register_dimension
 from tendon_taichi.body.walls import Walls
 from tendon_taichi.errors import SceneError
 from tendon_taichi.extract.metrics import tendon_metrics
@@ -78,12 +78,15 @@ def test_a_second_implementation_of_the_walls_plugs_in_below_extraction(monkeypa
 
 
 def test_a_body_of_an_unregistered_dimension_is_one_clear_error(monkeypatch):
-    solid = SimpleNamespace(body=SimpleNamespace(dim=3), origin="solid.toml")
-    with pytest.raises(SceneError, match=r"solid.toml: a 3D body cannot be built \(bodies may be 2D\)"):
-        dimension_of(solid)
-    stub = Dimension(3, "tetrahedron", None, None, None)
-    monkeypatch.setitem(dimension_module.DIMENSIONS, 3, PLANE)
-    assert register_dimension(stub) is PLANE and dimension_of(solid) is stub
+    """2D and 3D bodies are registered (3D: :data:`SOLID`); a fourth dimension is one
+    clear line, and a stub registered for it is the one found."""
+    assert dimension_of(SimpleNamespace(body=SimpleNamespace(dim=3), origin="solid.toml")) is SOLID
+    hyper = SimpleNamespace(body=SimpleNamespace(dim=4), origin="hyper.toml")
+    with pytest.raises(SceneError, match=r"hyper.toml: a 4D body cannot be built \(bodies may be 2D, 3D\)"):
+        dimension_of(hyper)
+    stub = Dimension(4, "pentachoron", None, None, None)
+    monkeypatch.setitem(dimension_module.DIMENSIONS, 4, PLANE)
+    assert register_dimension(stub) is PLANE and dimension_of(hyper) is stub
 
 
 def test_the_element_kernels_are_chosen_by_the_mesh_s_dimension(monkeypatch):

@@ -36,6 +36,7 @@ from ..io.progress import Progress
 from ..objective.term import State
 from ..optimizer.soft_ik import ADJOINT_TOL, SoftIK
 from ..physics import runtime
+from ..physics.elements import check_elements
 from ..solve.linear import resolve_solver
 from ..solve.newton import NewtonSolver
 from ..solve.pardiso import available as pardiso_available
@@ -256,6 +257,7 @@ def run_bench(scene: Scene, settings: BenchSettings, out_dir: str | Path = "reco
     forward_max_fibers = settings.forward_max_fibers
     if len(scene.poses) > 1:
         raise InputError(f"bench measures one-pose scenes; '{scene.name}' has {len(scene.poses)} poses")
+    check_elements(scene.body.dim, scene.origin)
     reporter = Progress() if progress is None else progress
     progress = reporter.message if progress is None else progress
     out_dir = Path(out_dir)

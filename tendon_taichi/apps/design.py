@@ -41,6 +41,7 @@ from ..io.progress import Progress
 from ..io.recording import RecordedRun, rewrite
 from ..optimizer.soft_ik import Figures
 from ..physics import runtime
+from ..physics.elements import check_elements
 from ..tasks.pool import Pool
 from .extract import Extraction, extract, frictionless_error, log_layout
 from .optimize import RunOptions, RunResult, optimize
@@ -213,6 +214,7 @@ def design(scene: Scene, level: int = 1, out: str | Path | None = None, settings
     factorizations run on one thread where it starts workers
     (:func:`design_threads`), theirs too."""
     t0 = time.perf_counter()
+    check_elements(scene.body.dim, scene.origin)
     progress = progress or Progress(enabled=False)
     prior = None if settings.routes_from is None else read_prior(settings.routes_from, scene)
     out = Path(out) if out is not None else default_out(scene, level)

@@ -22,6 +22,7 @@ from ..io.recording import (HeldRun, RecordedRun, Recorder, RecordingError, as_r
 from ..objective.settings import settings_dict
 from ..optimizer.homotopy import RunCallbacks, StageResult, run_schedule
 from ..optimizer.soft_ik import Figures, Iterate, SoftIK, active_set
+from ..physics.elements import check_elements
 from ..solve.cholesky import cholesky_library
 from ..solve.linear import LinearSettings
 from ..version import __version__
@@ -131,6 +132,7 @@ def optimize(scene: Scene, level: int | None = None, solver: str | None = None, 
         record = Path(record) if record is not None else Path(resume)
         meta = dict(run.meta)
     else:
+        check_elements(scene.body.dim, scene.origin)
         problem = build_problem(scene, 1 if level is None else level)
         solver = solver or "auto"
         default = Path("recordings") / f"{file_stem(scene.name)}-r{problem.level}.rrd"

@@ -11,6 +11,7 @@ from ..body.problem import Problem, build_problem
 from ..body.scene import Scene, load_scene
 from ..errors import InputError
 from ..physics import runtime
+from ..physics.elements import check_elements
 from ..physics.model import Model
 from ..solve.newton import Equilibrium, NewtonSolver
 
@@ -77,7 +78,9 @@ def simulate(scene: Scene | str, level: int = 1, ratios=0.0, solver: str = "auto
     from it already) with every fiber contracted by ``ratios`` (scalar or (f,)) of
     its rest length."""
     if problem is None:
-        problem = build_problem(scene if isinstance(scene, Scene) else load_scene(scene), level)
+        scene = scene if isinstance(scene, Scene) else load_scene(scene)
+        check_elements(scene.body.dim, scene.origin)
+        problem = build_problem(scene, level)
     r = contraction_ratios(problem, ratios)
     model = Model.from_problem(problem)
     newton = NewtonSolver(model, solver, tol=tol)

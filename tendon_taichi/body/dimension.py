@@ -1,6 +1,6 @@
 """The one place that decides a body's dimension, and what depends on it in this
 layer: a :class:`Dimension` gives the body's mesh at a level (simplices of
-``dim + 1`` nodes: triangles in 2D), its walls (the :class:`~.walls.Walls`
+``dim + 1`` nodes: triangles in 2D, tetrahedra in 3D), its walls (the :class:`~.walls.Walls`
 protocol) and its fiber lattice. The layers above choose their own
 dimension-dependent parts by ``problem.dim`` in the same way (the element
 kernels: :mod:`tendon_taichi.physics.elements`; the fabrication export and the
@@ -15,9 +15,12 @@ from ..dimensions import PerDimension
 from ..errors import SceneError
 from .exits import ExitSet, plane_exits
 from .fibers import FiberGraph, build_lattice
+from .lattice3d import cubic_lattice
 from .mesh import Mesh
 from .plane import plane_mesh, plane_walls
 from .scene import Scene
+from .solid import solid_mesh, solid_walls
+from .tets import TetMesh
 from .walls import Walls
 
 
@@ -27,7 +30,7 @@ class Dimension:
 
     Args:
         dim: the dimension; positions are (n, dim) arrays, m.
-        simplex: the mesh's element ("triangle"), of ``dim + 1`` nodes.
+        simplex: the mesh's element ("triangle", "tetrahedron"), of ``dim + 1`` nodes.
         mesh: ``mesh(scene, level)``, the body meshed at a resolution level.
         walls: ``walls(scene, mesh)``, the body's boundary for route clearance.
         lattice: ``lattice(mesh, spacing, tol)``, the fiber lattice of ``spacing``
@@ -39,8 +42,8 @@ class Dimension:
 
     dim: int
     simplex: str
-    mesh: Callable[[Scene, int], Mesh]
-    walls: Callable[[Scene, Mesh], Walls]
+    mesh: Callable[[Scene, int], Mesh | TetMesh]
+    walls: Callable[[Scene, Mesh | TetMesh], Walls]
     lattice: Callable[[Mesh, float, float], FiberGraph]
     exits: Callable[[Scene, Walls, float], ExitSet | None] | None = None
 
@@ -48,8 +51,11 @@ class Dimension:
 #: 2D bodies: triangles, the polygon walls, the 8-neighbour lattice
 PLANE = Dimension(2, "triangle", plane_mesh, plane_walls, build_lattice, exits=plane_exits)
 
+#: 3D bodies: tetrahedra, the mesh's surface as walls, the 26-neighbour cubic lattice; no exits yet
+SOLID = Dimension(3, "tetrahedron", solid_mesh, solid_walls, cubic_lattice)
+
 #: the dimensions bodies may have, by ``dim``
-DIMENSIONS = PerDimension("dimension", {PLANE.dim: PLANE})
+DIMENSIONS = PerDimension("dimension", {PLANE.dim: PLANE, SOLID.dim: SOLID})
 
 
 def register_dimension(dimension: Dimension) -> Dimension | None:

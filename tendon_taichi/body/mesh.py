@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import contextlib
 import io
+import warnings
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -223,12 +224,41 @@ def read_meshio(path: Path):
 
     said = io.StringIO()
     try:
-        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # meshio's own (an ASCII STL's size check overflows): not the user's
             return meshio.read(str(path))
     except (Exception, SystemExit) as exc:  # meshio raises many types for bad files; on some it prints and exits
         lines = [ln for ln in (str(exc) if isinstance(exc, Exception) else said.getvalue()).splitlines() if ln.strip()]
         why = lines[0].removeprefix("Error: ") if lines else "not a mesh file meshio can read"
         raise SceneError(f"cannot read mesh file '{path}': {why}") from None
+
+
+#: the one line for a mesh file that holds a surface (triangles in space), not tetrahedra
+SURFACE_UNAVAILABLE = ("tetrahedralizing a surface file is not available yet; give a tetrahedral mesh "
+                       "(.msh, .vtu, .vtk) or an extruded outline")
+
+
+def _planar(points: np.ndarray) -> bool:
+    """Whether points (n, 2 or 3) lie in a plane z = const (relative to their x-y extent)."""
+    return points.shape[1] < 3 or np.ptp(points[:, 2]) <= 1e-12 * max(np.ptp(points[:, :2]), 1e-300)
+
+
+@lru_cache(maxsize=16)
+def _file_dim(path: str, stamp: tuple[int, int]) -> int:
+    m = read_meshio(Path(path))
+    if any(c.type.startswith("tetra") for c in m.cells):
+        return 3
+    if len(m.points) and not _planar(np.asarray(m.points, dtype=float)):
+        raise SceneError(f"mesh file '{path}' is a surface: {SURFACE_UNAVAILABLE}")
+    return 2
+
+
+def mesh_file_dim(path: Path) -> int:
+    """The dimension of the body a mesh file holds: 3 where it has tetrahedra, else 2
+    (a planar triangle mesh); one SceneError line for a surface (points not in a plane,
+    no tetrahedra) or a file meshio cannot read. Read once per file version."""
+    st = Path(path).stat()
+    return _file_dim(str(path), (st.st_mtime_ns, st.st_size))
 
 
 def read_mesh(path: Path) -> Mesh:
@@ -238,7 +268,7 @@ def read_mesh(path: Path) -> Mesh:
     if not tris:
         raise SceneError(f"mesh file '{path}' has no triangle cells")
     pts = np.asarray(m.points, dtype=float)
-    if pts.shape[1] > 2 and np.ptp(pts[:, 2]) > 1e-12 * max(np.ptp(pts[:, :2]), 1e-300):
+    if not _planar(pts):
         raise SceneError(f"mesh file '{path}' is not planar (z varies)")
     mesh = _clean(pts[:, :2], np.concatenate(tris))
     if np.any(np.abs(mesh.areas) <= 1e-14 * mesh.size ** 2):

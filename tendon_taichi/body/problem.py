@@ -20,19 +20,21 @@ from .level import level_scale
 from .mesh import Embedding, Mesh
 from .scene import Scene
 from .exits import ExitSet
+from .tets import TetMesh
 from .walls import Walls
 
 
 @dataclass(frozen=True, eq=False)
 class Problem:
-    """A scene at resolution ``level``: ``mesh``, ``fixed`` (bool per node),
+    """A scene at resolution ``level``: ``mesh`` (triangles in 2D, a
+    :class:`~.tets.TetMesh` in 3D), ``fixed`` (bool per node),
     ``fibers``, and targets (``target`` embedding, ``target_goal`` (t, dim), m) -
     those of every pose, pose after pose (:attr:`target_pose`); :meth:`pose`
     gives one pose's problem."""
 
     scene: Scene
     level: int
-    mesh: Mesh
+    mesh: Mesh | TetMesh
     fixed: np.ndarray
     fibers: FiberGraph
     target: Embedding
@@ -49,9 +51,10 @@ class Problem:
 
     @property
     def force_scale(self) -> float:
-        """E h L, N: the scale of the equilibrium's force residual."""
+        """E h L in 2D, E L^2 in 3D, N: the scale of the equilibrium's force residual."""
         m = self.material
-        return m.youngs_modulus * m.thickness * self.size
+        width = m.thickness if self.dim == 2 else self.size
+        return m.youngs_modulus * width * self.size
 
     @cached_property
     def fiber_cables(self) -> CableSet:
@@ -72,7 +75,7 @@ class Problem:
     @cached_property
     def walls(self) -> Walls:
         """The body's walls (:class:`~.walls.Walls`): in 2D its outline and holes (from
-        the scene, or the mesh's triangles)."""
+        the scene, or the mesh's triangles), in 3D its mesh's surface."""
         return self.dimension.walls(self.scene, self.mesh)
 
     @cached_property
@@ -133,19 +136,23 @@ class Problem:
 
     def embed_waypoints(self, nodes: np.ndarray, waypoints: np.ndarray, hint: np.ndarray | None = None) -> Embedding:
         """A tendon's waypoints (k, dim) embedded in the rest mesh: exactly as its fiber
-        nodes are when it runs through them (``nodes`` (k,)), else located (trying
-        the triangles ``hint`` (k,) first)."""
+        nodes are when it runs through them (``nodes`` (k,)), else located (in 2D
+        trying the triangles ``hint`` (k,) first; a 3D mesh takes no hint)."""
         if len(nodes) == len(waypoints):
             emb = self.fibers.embedding
             return Embedding(emb.tri[nodes], emb.bary[nodes])
+        if self.dim != 2:
+            return self.mesh.locate(waypoints)[0]
         return self.mesh.locate(waypoints, hint=hint)[0]
 
     def target_positions(self, x: np.ndarray) -> np.ndarray:
         """Where the target points are (t, dim) for node positions ``x`` (n, dim)."""
-        return self.target.positions(self.mesh.triangles, x)
+        return self.target.positions(self.mesh.simplices, x)
 
     def counts(self) -> dict:
-        return {"nodes": self.mesh.n_nodes, "triangles": self.mesh.n_triangles,
+        """Nodes, elements ("triangles" in 2D, "tetrahedra" in 3D), fibers and free DOFs."""
+        elements = "triangles" if self.dim == 2 else "tetrahedra"
+        return {"nodes": self.mesh.n_nodes, elements: len(self.mesh.simplices),
                 "fibers": self.fibers.n_fibers, "dofs": int(self.dim * (~self.fixed).sum())}
 
 

@@ -12,6 +12,12 @@ optional unless marked *required*; the defaults below are the documented ones.
     ``max_triangle_area`` 8e-6 m^2 at resolution 1 (halves per level; for a
     mesh file: the file's mesh at level 1, refined to half its largest area
     per level).
+    A 3D body (``docs/scenes.md``): ``depth`` (m) extrudes the outline along z
+    from 0 to depth, with tetrahedra of edge ``edge_length`` (m, *required*, at
+    level 1; divided by sqrt(2) per level); or ``mesh`` names a file of
+    tetrahedra (``.msh``, ``.vtu``, ``.vtk``; used at level 1 only for now) in
+    ``units`` "m" (default) or "mm". No ``thickness`` or ``max_triangle_area``;
+    ``gravity``, boxes and points have three coordinates.
 ``[fibers]``
     ``spacing`` 0.005 m (divided by sqrt(2) per level), ``stiffness`` (EA)
     50 N, ``max_contraction`` (cmax) 0.33, ``max_payout`` (pmax) 0.5,
@@ -29,7 +35,7 @@ optional unless marked *required*; the defaults below are the documented ones.
     The realizable robot's tendons: ``friction`` 0.1, the capstan friction
     coefficient mu of their channels (0: frictionless); ``clearance`` 0.02,
     the least distance of a route from the outline and the holes, as a
-    fraction of the body size L.
+    fraction of the body size L; ``exit`` "inside" ("clamp" for a 3D body).
 ``[optimize]``
     See :class:`OptimizeSettings`.
 """
@@ -48,17 +54,27 @@ from ..objective.settings import Homotopy, OptimizeSettings, read_optimize
 from ..tables import TableReader, as_point
 from .geometry import (MIN_WIDTH_RATIO, normalize_polygon, outline_meets_box, polygon_self_intersects,
                        polygon_too_thin, polygons_overlap)
+from .mesh import mesh_file_dim
+
+#: a 3D body's mesh file units: metres per unit
+UNITS = {"m": 1.0, "mm": 1e-3}
+#: the [body] keys of 3D bodies only
+SOLID_KEYS = ("depth", "edge_length", "units")
+#: the [body] keys of 2D bodies only, and what a 3D body has instead
+PLANE_KEYS = {"thickness": "a 3D body's thickness is its depth or its mesh",
+              "max_triangle_area": "give edge_length, the tetrahedra's edge"}
 
 
 @dataclass(frozen=True)
 class Material:
-    """Body material and loading: E (Pa), nu, thickness h (m), density (kg/m^3), gravity (m/s^2)."""
+    """Body material and loading: E (Pa), nu, thickness h (m; 2D bodies only), density
+    (kg/m^3), gravity (dim,) m/s^2."""
 
     youngs_modulus: float = 5.0e4
     poisson_ratio: float = 0.45
     thickness: float = 0.01
     density: float = 1100.0
-    gravity: tuple[float, float] = (0.0, 0.0)
+    gravity: tuple[float, ...] = (0.0, 0.0)
 
     @property
     def mu(self) -> float:
@@ -74,19 +90,29 @@ class Material:
 
 @dataclass(frozen=True)
 class Body:
-    """The body's shape (an outline with holes, or a mesh file) and its material."""
+    """The body's shape (an outline with holes, extruded to ``depth`` in 3D, or a mesh
+    file) and its material."""
 
     outline: np.ndarray | None  # (k, 2), counter-clockwise after loading
     holes: tuple[np.ndarray, ...]  # each (k, 2), clockwise after loading
     mesh_file: Path | None
     material: Material
-    max_triangle_area: float | None  # m^2 at level 1
+    max_triangle_area: float | None  # m^2 at level 1 (2D)
+    depth: float | None = None  # m: the outline extruded along z from 0 to depth (3D)
+    edge_length: float | None = None  # m: the tetrahedra's edge at level 1 (3D)
+    units: str = "m"  # the length unit of a 3D mesh file (:data:`UNITS`)
+    tetrahedra: bool = False  # the mesh file holds tetrahedra (3D)
 
     @property
     def dim(self) -> int:
-        """The body's dimension: its outline's width (a mesh file is read as a 2D
-        triangle mesh)."""
-        return 2 if self.outline is None else int(np.shape(self.outline)[1])
+        """The body's dimension: 3 for an extruded outline or a mesh file of
+        tetrahedra, else 2 (an outline, or a triangle mesh file)."""
+        return 3 if self.depth is not None or self.tetrahedra else 2
+
+    @property
+    def scale(self) -> float:
+        """Metres per unit of the mesh file's coordinates."""
+        return UNITS[self.units]
 
 
 @dataclass(frozen=True)
@@ -133,12 +159,16 @@ class TendonSettings:
         return self
 
 
+#: the ``[tendons] exit`` of a scene that does not say, by the body's dimension
+DEFAULT_EXIT = {2: TendonSettings.exit, 3: "clamp"}
+
+
 @dataclass(frozen=True)
 class Box:
-    """An axis-aligned box, edges included: ``lo`` and ``hi`` corners, m."""
+    """An axis-aligned box, edges included: ``lo`` and ``hi`` corners (dim,), m."""
 
-    lo: tuple[float, float]
-    hi: tuple[float, float]
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
 
     def contains(self, points: np.ndarray, tol: float = 0.0) -> np.ndarray:
         p = np.asarray(points, dtype=float)
@@ -154,10 +184,10 @@ class Box:
 
 @dataclass(frozen=True)
 class Target:
-    """A material point (rest coordinates, m) and its goal position (m)."""
+    """A material point (rest coordinates (dim,), m) and its goal position (dim,), m."""
 
-    point: tuple[float, float]
-    goal: tuple[float, float]
+    point: tuple[float, ...]
+    goal: tuple[float, ...]
 
 
 @dataclass(frozen=True)
@@ -223,49 +253,108 @@ def _read_body(r: TableReader, base_dir: Path | None, check_files: bool = True) 
     nu = r.number("poisson_ratio", Material.poisson_ratio, gt=-1.0, lt=0.5)
     h = r.number("thickness", Material.thickness, gt=0.0)
     rho = r.number("density", Material.density, ge=0.0)
-    g = r.point("gravity", Material.gravity)
+    mesh_file = _mesh_file(r, base_dir, check_files)
+    dim = _body_dim(r, mesh_file)
+    g = r.point("gravity", (0.0,) * dim, dim=dim, unit="components")
     material = Material(E, nu, h, rho, g)
+    if dim == 3:
+        return _solid_body(r, mesh_file, material)
     area = r.number("max_triangle_area", None, gt=0.0)
-
-    outline, holes, mesh_file = None, (), None
-    if r.has("mesh") == r.has("outline"):
-        raise SceneError(f"{r.origin}: [body] needs exactly one of 'outline' or 'mesh'")
-    if r.has("mesh"):
-        name = r.raw("mesh")
-        if not isinstance(name, str) or not name:
-            raise SceneError(f"{r.origin}: body.mesh must be a file name")
-        mesh_file = Path(name)
-        if not mesh_file.is_absolute():
-            mesh_file = (base_dir or Path.cwd()) / mesh_file
-        if check_files and not mesh_file.is_file():
-            raise SceneError(f"{r.origin}: body.mesh file '{mesh_file}' does not exist")
-        if r.has("holes"):
-            raise SceneError(f"{r.origin}: body.holes cannot be combined with body.mesh")
-    else:
-        outline = r.polygon(r.raw("outline"), "outline")
-        if polygon_self_intersects(outline):
-            raise SceneError(f"{r.origin}: body.outline is self-intersecting or degenerate")
-        _check_width(outline, f"{r.origin}: body.outline")
-        outline = normalize_polygon(outline, ccw=True)
-        if r.has("holes"):
-            raw = r.raw("holes")
-            if not isinstance(raw, list):
-                raise SceneError(f"{r.origin}: body.holes must be a list of polygons")
-            hs = []
-            for i, poly in enumerate(raw):
-                hole = r.polygon(poly, f"holes[{i}]")
-                if polygon_self_intersects(hole):
-                    raise SceneError(f"{r.origin}: body.holes[{i}] is self-intersecting or degenerate")
-                _check_width(hole, f"{r.origin}: body.holes[{i}]")
-                hs.append(normalize_polygon(hole, ccw=False))
-            holes = tuple(hs)
-            problem = polygons_overlap(outline, holes)
-            if problem:
-                raise SceneError(f"{r.origin}: body.{problem}")
-        if area is None:
-            area = 8.0e-6
+    extra = [key for key in SOLID_KEYS if r.has(key)]
+    if extra:
+        raise SceneError(f"{r.origin}: body.{extra[0]} applies to 3D bodies only (an outline with a depth, "
+                         "or a mesh file of tetrahedra)")
+    outline, holes = (None, ()) if mesh_file is not None else _read_outline(r)
+    if mesh_file is None and area is None:
+        area = 8.0e-6
     r.finish()
     return Body(outline, holes, mesh_file, material, area)
+
+
+def _mesh_file(r: TableReader, base_dir: Path | None, check_files: bool) -> Path | None:
+    """The body's mesh file (relative to ``base_dir``), None for an outline; one line
+    where there is not exactly one of them, or the file is missing (``check_files``)."""
+    if r.has("mesh") == r.has("outline"):
+        raise SceneError(f"{r.origin}: [body] needs exactly one of 'outline' or 'mesh'")
+    if not r.has("mesh"):
+        return None
+    name = r.raw("mesh")
+    if not isinstance(name, str) or not name:
+        raise SceneError(f"{r.origin}: body.mesh must be a file name")
+    mesh_file = Path(name)
+    if not mesh_file.is_absolute():
+        mesh_file = (base_dir or Path.cwd()) / mesh_file
+    if check_files and not mesh_file.is_file():
+        raise SceneError(f"{r.origin}: body.mesh file '{mesh_file}' does not exist")
+    if r.has("holes"):
+        raise SceneError(f"{r.origin}: body.holes cannot be combined with body.mesh")
+    return mesh_file
+
+
+def _body_dim(r: TableReader, mesh_file: Path | None) -> int:
+    """3 for an outline with a ``depth`` or a mesh file of tetrahedra, else 2; a mesh
+    file that is not there (a recorded run's) is 3D when the body has 3D keys."""
+    if r.has("depth"):
+        return 3
+    if mesh_file is None:
+        return 2
+    if mesh_file.is_file():
+        try:
+            return mesh_file_dim(mesh_file)
+        except SceneError as exc:
+            raise SceneError(f"{r.origin}: body.mesh: {exc}") from None
+    return 3 if r.has("edge_length") or r.has("units") else 2
+
+
+def _solid_body(r: TableReader, mesh_file: Path | None, material: Material) -> Body:
+    """A 3D [body]: an outline extruded to ``depth`` with tetrahedra of ``edge_length``,
+    or a mesh file of tetrahedra in ``units``."""
+    for key, instead in PLANE_KEYS.items():
+        if r.has(key):
+            raise SceneError(f"{r.origin}: body.{key} does not apply to a 3D body ({instead})")
+    depth = r.number("depth", None, gt=0.0)
+    edge = r.number("edge_length", None, gt=0.0)
+    units = r.choice("units", "m", tuple(UNITS))
+    if mesh_file is not None:
+        if depth is not None:
+            raise SceneError(f"{r.origin}: body.depth extrudes an outline; it cannot be combined with body.mesh")
+        r.finish()
+        return Body(None, (), mesh_file, material, None, edge_length=edge, units=units, tetrahedra=True)
+    if edge is None:
+        raise SceneError(f"{r.origin}: body.edge_length is required for an extruded body (the tetrahedra's "
+                         "edge at level 1, m)")
+    if r.has("units"):
+        raise SceneError(f"{r.origin}: body.units applies to a mesh file only (an outline and its depth are "
+                         "in metres)")
+    outline, holes = _read_outline(r)
+    r.finish()
+    return Body(outline, holes, None, material, None, depth=depth, edge_length=edge)
+
+
+def _read_outline(r: TableReader) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+    """The body's outline (k, 2), counter-clockwise, and its holes, each (k, 2) clockwise, m."""
+    outline = r.polygon(r.raw("outline"), "outline")
+    if polygon_self_intersects(outline):
+        raise SceneError(f"{r.origin}: body.outline is self-intersecting or degenerate")
+    _check_width(outline, f"{r.origin}: body.outline")
+    outline = normalize_polygon(outline, ccw=True)
+    if not r.has("holes"):
+        return outline, ()
+    raw = r.raw("holes")
+    if not isinstance(raw, list):
+        raise SceneError(f"{r.origin}: body.holes must be a list of polygons")
+    hs = []
+    for i, poly in enumerate(raw):
+        hole = r.polygon(poly, f"holes[{i}]")
+        if polygon_self_intersects(hole):
+            raise SceneError(f"{r.origin}: body.holes[{i}] is self-intersecting or degenerate")
+        _check_width(hole, f"{r.origin}: body.holes[{i}]")
+        hs.append(normalize_polygon(hole, ccw=False))
+    holes = tuple(hs)
+    problem = polygons_overlap(outline, holes)
+    if problem:
+        raise SceneError(f"{r.origin}: body.{problem}")
+    return outline, holes
 
 
 def _read_fibers(r: TableReader) -> FiberSettings:
@@ -281,11 +370,11 @@ def _read_fibers(r: TableReader) -> FiberSettings:
     return fs
 
 
-def _read_tendons(r: TableReader) -> TendonSettings:
+def _read_tendons(r: TableReader, dim: int) -> TendonSettings:
     d = TendonSettings()
     ts = TendonSettings(friction=r.number("friction", d.friction, ge=0.0, le=MAX_FRICTION),
                         clearance=r.number("clearance", d.clearance, ge=0.0, le=MAX_CLEARANCE),
-                        exit=r.choice("exit", d.exit, EXITS))
+                        exit=r.choice("exit", DEFAULT_EXIT[dim], EXITS))
     r.finish()
     return ts
 
@@ -326,6 +415,24 @@ def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None
     body = _read_body(TableReader(doc.raw("body"), "body", origin), base_dir, check_files)
     fibers = _read_fibers(TableReader(doc.raw("fibers") if doc.has("fibers") else {}, "fibers", origin))
 
+    fixed = _read_fixed(doc, body.dim)
+    poses = _read_poses(doc, body.dim)
+    opt = read_optimize(TableReader(doc.raw("optimize") if doc.has("optimize") else {},
+                                    "optimize", origin), fibers)
+    tendons = _read_tendons(TableReader(doc.raw("tendons") if doc.has("tendons") else {}, "tendons", origin),
+                            body.dim)
+    doc.finish()
+    return _clamp_checked(Scene(name, body, fibers, fixed, poses, optimize=opt, source=text, origin=origin,
+                                tendons=tendons))
+
+
+#: how a [[fixed]] box is written, by the body's dimension
+_BOX_FORMS = {2: "[[xmin, ymin], [xmax, ymax]]", 3: "[[xmin, ymin, zmin], [xmax, ymax, zmax]]"}
+
+
+def _read_fixed(doc: TableReader, dim: int) -> tuple[Box, ...]:
+    """The [[fixed]] boxes of a ``dim``-dimensional body."""
+    origin = doc.origin
     fixed = []
     for i, item in enumerate(_array_of_tables(doc, "fixed")):
         r = TableReader(item, f"fixed[{i}]", origin)
@@ -333,20 +440,13 @@ def parse_scene(text: str, origin: str = "<scene>", base_dir: Path | None = None
             raise SceneError(f"{origin}: fixed[{i}].box is required")
         box = r.raw("box")
         if not isinstance(box, list) or len(box) != 2:
-            raise SceneError(f"{origin}: fixed[{i}].box must be [[xmin, ymin], [xmax, ymax]]")
-        lo, hi = (as_point(c, f"{origin}: fixed[{i}].box") for c in box)
-        if lo[0] > hi[0] or lo[1] > hi[1]:
+            raise SceneError(f"{origin}: fixed[{i}].box must be {_BOX_FORMS[dim]}")
+        lo, hi = (as_point(c, f"{origin}: fixed[{i}].box", dim, "coordinates per corner") for c in box)
+        if any(a > b for a, b in zip(lo, hi)):
             raise SceneError(f"{origin}: fixed[{i}].box has min > max")
         r.finish()
         fixed.append(Box(lo, hi))
-
-    poses = _read_poses(doc)
-    opt = read_optimize(TableReader(doc.raw("optimize") if doc.has("optimize") else {},
-                                    "optimize", origin), fibers)
-    tendons = _read_tendons(TableReader(doc.raw("tendons") if doc.has("tendons") else {}, "tendons", origin))
-    doc.finish()
-    return _clamp_checked(Scene(name, body, fibers, tuple(fixed), poses, optimize=opt, source=text, origin=origin,
-                                tendons=tendons))
+    return tuple(fixed)
 
 
 def _clamp_checked(scene: Scene) -> Scene:
@@ -360,28 +460,29 @@ def _clamp_checked(scene: Scene) -> Scene:
     raise SceneError(f"{scene.origin}: tendons.exit = \"clamp\" but no [[fixed]] box meets the outline")
 
 
-def _read_targets(holder: TableReader, where: str) -> tuple[Target, ...]:
+def _read_targets(holder: TableReader, where: str, dim: int) -> tuple[Target, ...]:
     targets = []
     for i, item in enumerate(_array_of_tables(holder, "targets", where)):
         r = TableReader(item, f"{where}targets[{i}]", holder.origin)
-        targets.append(Target(r.point("point", required=True), r.point("goal", required=True)))
+        targets.append(Target(r.point("point", required=True, dim=dim), r.point("goal", required=True, dim=dim)))
         r.finish()
     return tuple(targets)
 
 
-def _read_poses(doc: TableReader) -> tuple[Pose, ...]:
-    """``[[targets]]`` (one pose) or ``[[poses]]`` with their own ``[[poses.targets]]``."""
+def _read_poses(doc: TableReader, dim: int) -> tuple[Pose, ...]:
+    """``[[targets]]`` (one pose) or ``[[poses]]`` with their own ``[[poses.targets]]``,
+    points of ``dim`` coordinates."""
     if doc.has("poses") and doc.has("targets"):
         raise SceneError(f"{doc.origin}: give either [[targets]] (one pose) or [[poses]], not both")
     if not doc.has("poses"):
-        return (Pose("pose", _read_targets(doc, "")),)
+        return (Pose("pose", _read_targets(doc, "", dim)),)
     poses = []
     for i, item in enumerate(_array_of_tables(doc, "poses")):
         r = TableReader(item, f"poses[{i}]", doc.origin)
         name = r.raw("name") if r.has("name") else f"pose{i}"
         if not isinstance(name, str) or not name:
             raise SceneError(f"{doc.origin}: poses[{i}].name must be a non-empty string")
-        poses.append(Pose(name, _read_targets(r, f"poses[{i}].")))
+        poses.append(Pose(name, _read_targets(r, f"poses[{i}].", dim)))
         r.finish()
     names = [p.name for p in poses]
     if len(set(names)) != len(names):

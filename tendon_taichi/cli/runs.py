@@ -67,9 +67,11 @@ def cmd_simulate(args) -> int:
     from ..body.problem import build_problem
     from ..body.scene import load_scene
     from ..io.export import write_export, write_vtu
+    from ..physics.elements import check_elements
 
     t0 = time.perf_counter()
     scene = load_scene(args.scene)
+    check_elements(scene.body.dim, scene.origin)
     problem = build_problem(scene, args.level)
     ratios = contraction_ratios(problem, args.uniform if args.contract is None
                                 else _read_ratios(args.contract))

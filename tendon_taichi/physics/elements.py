@@ -11,6 +11,7 @@ from __future__ import annotations
 from types import ModuleType
 
 from ..dimensions import PerDimension
+from ..errors import TendonError
 from . import forces
 
 #: the element kernels of each dimension, by ``dim``: 2D, Neo-Hookean triangles (forces.py)
@@ -20,3 +21,13 @@ ELEMENTS = PerDimension("element kernels", {2: forces})
 def element_kernels(dim: int) -> ModuleType:
     """The element kernels of a ``dim``-dimensional mesh (:data:`ELEMENTS`)."""
     return ELEMENTS.of(dim)
+
+
+def check_elements(dim: int, origin: str | None = None) -> None:
+    """One TendonError line, before any work, where no element kernels are registered
+    for ``dim`` (3D bodies today: they can be meshed and rigged, not solved); ``origin``
+    (a scene file) starts the line."""
+    if dim not in ELEMENTS:
+        where = f"{origin}: " if origin else ""
+        raise TendonError(f"{where}{dim}D bodies can be meshed and rigged, but their physics (element kernels) "
+                          "is not built yet")

@@ -23,7 +23,7 @@ from ..body.mesh import Mesh
 from ..body.scene import Material
 from ..probes import probe
 from . import runtime
-from .elements import element_kernels
+from .elements import check_elements, element_kernels
 from .buffers import k_copy_nodes, k_read, k_read_int, k_read_ranges, k_write, k_write_int, k_write_ranges
 from .capstan import Capstan, FrictionJacobian, PointMap
 from .layout import Scalar, Slot, allocate, csr
@@ -80,6 +80,7 @@ class Model:
 
     def __init__(self, mesh: Mesh, fixed: np.ndarray, material: Material, cables: CableSet,
                  eps: float = 0.01, parallel: bool | None = None):
+        check_elements(mesh.dim)
         runtime.ensure_init()
         self.mesh, self.material, self.cables, self.eps = mesh, material, cables, float(eps)
         self.fixed = np.asarray(fixed, dtype=bool)
