@@ -144,8 +144,13 @@ def build_lattice(mesh: Mesh, spacing: float, tol: float | None = None) -> Fiber
         cand.append(np.stack([a[ok], b[ok]], axis=1))
     cand = np.concatenate(cand)
     keep = _segments_inside(mesh, points[cand[:, 0]], points[cand[:, 1]], tol)
-    edges = cand[keep]
+    return lattice_graph(mesh, points, cand[keep], spacing)
 
+
+def lattice_graph(mesh, points: np.ndarray, edges: np.ndarray, spacing: float) -> FiberGraph:
+    """The fiber graph of lattice ``points`` (k, dim), m, and the ``edges`` (f, 2) kept
+    inside the body: the points no fiber uses dropped, the rest embedded in ``mesh``
+    (a triangle or tetrahedral mesh, anything with ``locate``)."""
     used = np.unique(edges)
     remap = -np.ones(len(points), dtype=np.int64)
     remap[used] = np.arange(len(used))

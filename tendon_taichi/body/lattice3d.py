@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fibers import FiberGraph
+from .fibers import FiberGraph, lattice_graph
 from .tets import TetMesh
 
 #: lattice neighbour offsets; with their opposites they make the 26-neighbourhood
@@ -119,11 +119,4 @@ def cubic_lattice(mesh: TetMesh, spacing: float, tol: float | None = None) -> Fi
 
     cand = _candidates(index)
     keep = _segments_inside(mesh, points[cand[:, 0]], points[cand[:, 1]], tol)
-    edges = cand[keep]
-
-    used = np.unique(edges)
-    remap = -np.ones(len(points), dtype=np.int64)
-    remap[used] = np.arange(len(used))
-    nodes = points[used]
-    embedding, _ = mesh.locate(nodes)
-    return FiberGraph(nodes, embedding, remap[edges], float(spacing))
+    return lattice_graph(mesh, points, cand[keep], spacing)
