@@ -108,3 +108,65 @@ def as_built_residual(a) -> float:
     scale = np.abs(seg_t).max()
     assert scale > 0
     return float(np.abs(f[~fixed]).max() / scale)
+
+
+# ---------------------------------------------------------------- 3D: constant-strain tetrahedra
+def tet_edges(x, T):
+    """Edge vectors x_a - x_0 (a = 1, 2, 3) of tetrahedra T (m, 4) as columns (m, 3, 3)."""
+    return np.stack([x[T[:, 1]] - x[T[:, 0]], x[T[:, 2]] - x[T[:, 0]], x[T[:, 3]] - x[T[:, 0]]], axis=2)
+
+
+def tet_volumes(X, T):
+    """Rest volumes (m,) of tetrahedra T (m, 4): (b - a) . ((c - a) x (d - a)) / 6."""
+    a, b, c, d = (X[T[:, k]] for k in range(4))
+    return np.einsum("kd,kd->k", b - a, np.cross(c - a, d - a)) / 6.0
+
+
+def neo_hookean_psi_3d(F, mu, lam):
+    """Strain energy density (J/m^3) of F (..., 3, 3): mu/2 (|F|^2 - 3) - mu ln J + lam/2 (ln J)^2."""
+    lnJ = np.log(np.linalg.det(F))
+    return 0.5 * mu * (np.einsum("...ij,...ij->...", F, F) - 3) - mu * lnJ + 0.5 * lam * lnJ ** 2
+
+
+def neo_hookean_P_3d(F, mu, lam):
+    """First Piola-Kirchhoff stress (Pa) of F (m, 3, 3), with F^-T = cof(F) / J written by cross
+    products of F's columns: mu (F - F^-T) + lam ln J F^-T."""
+    f0, f1, f2 = F[:, :, 0], F[:, :, 1], F[:, :, 2]
+    cof = np.stack([np.cross(f1, f2), np.cross(f2, f0), np.cross(f0, f1)], axis=2)
+    J = np.einsum("kd,kd->k", f0, cof[:, :, 0])
+    FinvT = cof / J[:, None, None]
+    return mu * (F - FinvT) + lam * np.log(J)[:, None, None] * FinvT
+
+
+def tet_body_forces(X, T, x, mu, lam):
+    """Internal nodal forces dE_body/dx (n, 3) of constant-strain Neo-Hookean tetrahedra:
+    V P Bm^T's columns on nodes 1-3, minus their sum on node 0."""
+    Bm = np.linalg.inv(tet_edges(X, T))
+    H = tet_volumes(X, T)[:, None, None] * neo_hookean_P_3d(tet_edges(x, T) @ Bm, mu, lam) @ np.swapaxes(Bm, 1, 2)
+    f = np.zeros_like(x)
+    for a in range(3):
+        np.add.at(f, T[:, a + 1], H[:, :, a])
+    np.add.at(f, T[:, 0], -H.sum(axis=2))
+    return f
+
+
+def tet_fiber_forces(T, x, node_tet, node_bary, fibers, tau):
+    """dU/dx (n, 3) of fibers of tensions tau (f,) between fiber nodes embedded in tetrahedra
+    ``node_tet`` (k,) with weights ``node_bary`` (k, 4)."""
+    c = np.einsum("kj,kjd->kd", node_bary, x[T[node_tet]])
+    d = c[fibers[:, 1]] - c[fibers[:, 0]]
+    n = d / np.linalg.norm(d, axis=1, keepdims=True)
+    fn = np.zeros_like(c)
+    np.add.at(fn, fibers[:, 1], tau[:, None] * n)
+    np.add.at(fn, fibers[:, 0], -tau[:, None] * n)
+    f = np.zeros_like(x)
+    for j in range(4):
+        np.add.at(f, T[node_tet, j], node_bary[:, j:j + 1] * fn)
+    return f
+
+
+def tet_gravity_forces(X, T, density, g):
+    """dE_g/dx = -m_i g (n, 3), each tetrahedron's mass density V lumped a quarter per corner."""
+    m = np.zeros(len(X))
+    np.add.at(m, T.ravel(), np.repeat(density * tet_volumes(X, T) / 4, 4))
+    return -m[:, None] * np.asarray(g)[None, :]
