@@ -36,7 +36,8 @@ def body_forces(X, T, x, E, nu, h):
 
 
 def fiber_forces(T, x, node_tri, node_bary, fibers, tau):
-    """dU/dx (n, 2) of fibers with tensions tau between embedded fiber nodes."""
+    """dU/dx (n, d) of fibers with tensions tau (f,) between fiber nodes embedded in the
+    elements ``node_tri`` (k,) with weights ``node_bary`` (k, d + 1): triangles or tetrahedra."""
     c = np.einsum("kj,kjd->kd", node_bary, x[T[node_tri]])
     d = c[fibers[:, 1]] - c[fibers[:, 0]]
     n = d / np.linalg.norm(d, axis=1, keepdims=True)
@@ -44,7 +45,7 @@ def fiber_forces(T, x, node_tri, node_bary, fibers, tau):
     np.add.at(fn, fibers[:, 1], tau[:, None] * n)
     np.add.at(fn, fibers[:, 0], -tau[:, None] * n)
     f = np.zeros_like(x)
-    for j in range(3):
+    for j in range(node_bary.shape[1]):
         np.add.at(f, T[node_tri, j], node_bary[:, j:j + 1] * fn)
     return f
 
@@ -147,21 +148,6 @@ def tet_body_forces(X, T, x, mu, lam):
     for a in range(3):
         np.add.at(f, T[:, a + 1], H[:, :, a])
     np.add.at(f, T[:, 0], -H.sum(axis=2))
-    return f
-
-
-def tet_fiber_forces(T, x, node_tet, node_bary, fibers, tau):
-    """dU/dx (n, 3) of fibers of tensions tau (f,) between fiber nodes embedded in tetrahedra
-    ``node_tet`` (k,) with weights ``node_bary`` (k, 4)."""
-    c = np.einsum("kj,kjd->kd", node_bary, x[T[node_tet]])
-    d = c[fibers[:, 1]] - c[fibers[:, 0]]
-    n = d / np.linalg.norm(d, axis=1, keepdims=True)
-    fn = np.zeros_like(c)
-    np.add.at(fn, fibers[:, 1], tau[:, None] * n)
-    np.add.at(fn, fibers[:, 0], -tau[:, None] * n)
-    f = np.zeros_like(x)
-    for j in range(4):
-        np.add.at(f, T[node_tet, j], node_bary[:, j:j + 1] * fn)
     return f
 
 

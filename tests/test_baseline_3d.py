@@ -8,8 +8,7 @@ import copy
 
 import numpy as np
 import pytest
-from reference import (lame, neo_hookean_psi_3d, tet_body_forces, tet_fiber_forces, tet_gravity_forces,
-                       zcq_d1)
+from reference import fiber_forces, lame, neo_hookean_psi_3d, tet_body_forces, tet_gravity_forces, zcq_d1
 
 from tendon_taichi import build_problem, parse_scene
 from tendon_taichi.apps.baseline import BaselineGradient
@@ -144,8 +143,8 @@ def test_the_newton_equilibrium_balances_independent_forces(problem, bent):
     tau = problem.scene.fibers.stiffness * zcq_d1(e, problem.scene.fibers.eps)
     assert (tau > 0).sum() >= 5
     force = (tet_body_forces(mesh.nodes, mesh.simplices, bent, mu, lam)
-             + tet_fiber_forces(mesh.simplices, bent, node_tet=f.embedding.tri, node_bary=f.embedding.bary,
-                                fibers=f.edges, tau=tau)
+             + fiber_forces(mesh.simplices, bent, node_tri=f.embedding.tri, node_bary=f.embedding.bary,
+                          fibers=f.edges, tau=tau)
              + tet_gravity_forces(mesh.nodes, mesh.simplices, mat.density, mat.gravity))
     assert np.abs(force[~problem.fixed]).max() <= 1e-10 * problem.force_scale
     assert np.abs(force[problem.fixed]).max() >= 1e-3 * tau.max()  # the clamp holds the finger
