@@ -338,8 +338,9 @@ class _Search:
             out.append(Candidate("drop", (i,), routes[:i] + routes[i + 1:], np.delete(start, i, axis=1)))
         reach = self.options.gap * self.problem.size
         clearance = self.rs.clearance
-        self.make_joins([(routes[i], routes[j]) for i, j in partner_pairs(routes)], reach, clearance)
-        for i, j in partner_pairs(routes):
+        pairs = partner_pairs(routes)
+        self.make_joins([(routes[i], routes[j]) for i, j in pairs], reach, clearance)
+        for i, j in pairs:
             rest = [r for k, r in enumerate(routes) if k not in (i, j)]
             rest_start = np.delete(start, [i, j], axis=1)
             for joined in self.joins(routes[i], routes[j], reach, clearance):

@@ -34,8 +34,9 @@ def pooled_candidates(search: _Search, pool: list[Route], k: int,
         return [_candidate(search, "set", ids, [pool[i] for i in ids]) for ids in sets]
     reach, clearance = search.options.gap * search.problem.size, search.rs.clearance
     out = _singles(search, pool)
-    search.make_joins([(pool[i], pool[j]) for i, j in partner_pairs(pool)], reach, clearance)
-    for i, j in partner_pairs(pool):
+    pairs = partner_pairs(pool)
+    search.make_joins([(pool[i], pool[j]) for i, j in pairs], reach, clearance)
+    for i, j in pairs:
         out += [_candidate(search, "join", (i, j), [joined])
                 for joined in search.joins(pool[i], pool[j], reach, clearance)]
     return out
